@@ -1,0 +1,3 @@
+from hrlp.cli import main
+
+main()

@@ -1,0 +1,240 @@
+"""Trust Region Policy Optimization (Schulman et al. 2015) over the :class:`~hrlp.policies.distributions.Distribution`
+interface.
+
+The update never learns what kind of distribution it optimises: for the Manager, ``dist_fn`` returns a
+:class:`~hrlp.policies.distributions.Hierarchical`, whose ``kl`` is Lemma 1, so the trust region and the Fisher
+matrix are the hierarchical ones of Section 3.1 without any special case here. Only the tensors passed as
+``policy_params`` move; frozen skills and the value network never enter the trust region.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from hrlp.algos.kernels import (
+    backtracking_line_search,
+    conjugate_gradient,
+    flat_grad,
+    get_flat_params,
+    make_fisher_vector_product,
+    max_step_length,
+    standardize,
+)
+from hrlp.policies.distributions import Distribution
+
+__all__ = ["TRPOConfig", "TRPOStats", "surrogate_objective", "trpo_update"]
+
+
+@dataclass(frozen=True)
+class TRPOConfig:
+    """TRPO settings. Defaults: the paper's Appendix D where it states a value, modular_rl's TRPO runs otherwise."""
+
+    max_kl: float = 0.01
+    """Trust-region radius delta: bound on the mean KL(old || new) over the batch's states (Appendix D: 0.01)."""
+    cg_iters: int = 10
+    """Conjugate-gradient iterations for the natural-gradient direction F^-1 g (modular_rl: 10)."""
+    cg_damping: float = 0.1
+    """Multiple of the identity added to the Fisher matrix in CG; keeps F + lambda I well conditioned for small
+    batches. modular_rl's code default is 1e-3, its published TRPO runs (experiments/2-trpo-scripts.txt) use 0.1."""
+    cg_residual_tol: float = 1e-10
+    """CG stops early once the squared residual norm falls below this."""
+    line_search_backtracks: int = 10
+    """Number of step sizes tried by the backtracking line search (modular_rl: 10)."""
+    line_search_shrink: float = 0.5
+    """Factor by which the step shrinks after each rejected candidate (modular_rl: 0.5)."""
+    gamma: float = 0.99
+    """Discount per (decision) step for returns and GAE (Appendix D: 0.99). For the Manager the effective per-step
+    discount is gamma ** tau for a macro-action of tau low-level steps, passed to GAE as ``discount``."""
+    gae_lambda: float = 0.97
+    """GAE lambda. The paper does not state one; 0.97 is what modular_rl's published TRPO runs use
+    (``--lam=0.97``; the option's code default is 1.0, i.e. plain Monte-Carlo advantages)."""
+    entropy_coef: float = 0.0
+    """Weight of the mean-entropy bonus added to the surrogate (TRPO as published: 0)."""
+    normalize_advantages: bool = True
+    """Standardise advantages to zero mean and unit variance over the batch before the update (modular_rl does)."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.max_kl) and self.max_kl > 0):
+            raise ValueError(f"max_kl must be a positive finite number, got {self.max_kl}")
+        if self.cg_iters < 1:
+            raise ValueError(f"cg_iters must be >= 1, got {self.cg_iters}")
+        if not self.cg_damping >= 0:
+            raise ValueError(f"cg_damping must be >= 0, got {self.cg_damping}")
+        if not self.cg_residual_tol >= 0:
+            raise ValueError(f"cg_residual_tol must be >= 0, got {self.cg_residual_tol}")
+        if self.line_search_backtracks < 1:
+            raise ValueError(f"line_search_backtracks must be >= 1, got {self.line_search_backtracks}")
+        if not 0 < self.line_search_shrink < 1:
+            raise ValueError(f"line_search_shrink must be in (0, 1), got {self.line_search_shrink}")
+        if not 0 <= self.gamma <= 1:
+            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
+        if not 0 <= self.gae_lambda <= 1:
+            raise ValueError(f"gae_lambda must be in [0, 1], got {self.gae_lambda}")
+        if not self.entropy_coef >= 0:
+            raise ValueError(f"entropy_coef must be >= 0, got {self.entropy_coef}")
+
+
+@dataclass(frozen=True)
+class TRPOStats:
+    """What one :func:`trpo_update` did; every field is a plain number, ready for a logger."""
+
+    kl: float
+    """Mean KL(old || new) over the batch after the update (<= max_kl when accepted; ~0 when not)."""
+    kl_max: float
+    """Largest per-state KL(old || new) after the update (the D_KL^max of Theorem 1, on the batch)."""
+    surrogate_before: float
+    """Surrogate L(theta_old) = mean(A) (+ entropy bonus) at the old parameters."""
+    surrogate_after: float
+    """Surrogate mean(pi_new/pi_old * A) (+ entropy bonus) at the final parameters."""
+    expected_improvement: float
+    """First-order prediction g^T (full step) of the surrogate gain for the full step."""
+    line_search_steps: int
+    """Candidate steps evaluated by the line search (1 = full step accepted; 0 = no step attempted)."""
+    step_fraction: float
+    """Fraction of the full natural-gradient step that was applied (0.0 when rejected)."""
+    accepted: bool
+    """Whether the parameters changed."""
+    entropy_before: float
+    """Mean policy entropy over the batch before the update."""
+    entropy: float
+    """Mean policy entropy over the batch after the update."""
+    grad_norm: float
+    """Euclidean norm of the surrogate gradient g."""
+    step_norm: float
+    """Euclidean norm of the parameter change actually applied."""
+    beta: float
+    """Full-step length sqrt(2 delta / s^T F s) along the CG direction s."""
+    cg_relative_residual: float
+    """||(F + damping I) s - g|| / ||g||: how well CG solved for the natural gradient."""
+
+    @property
+    def improvement(self) -> float:
+        """Actual surrogate gain ``surrogate_after - surrogate_before``."""
+        return self.surrogate_after - self.surrogate_before
+
+    def to_dict(self) -> dict[str, float | int | bool]:
+        """Fields as a flat dict (for CSV/JSONL/TensorBoard loggers)."""
+        return dataclasses.asdict(self)
+
+
+def surrogate_objective(
+    dist: Distribution, actions: Tensor, old_log_prob: Tensor, advantages: Tensor, entropy_coef: float = 0.0
+) -> Tensor:
+    """Importance-sampled surrogate ``L(theta) = mean_b (pi_theta(a_b|s_b) / pi_old(a_b|s_b)) A_b`` (+ entropy bonus).
+
+    Args:
+        dist: current policy on the batch (``B`` states).
+        actions: ``[B, ...]`` taken actions in ``dist``'s encoding.
+        old_log_prob: ``[B]`` ``log pi_old(a_b | s_b)`` (detached).
+        advantages: ``[B]``.
+        entropy_coef: weight of ``mean_b H(pi_theta(.|s_b))``.
+
+    Returns a scalar to be maximised.
+    """
+    ratio = torch.exp(dist.log_prob(actions) - old_log_prob)
+    objective = (ratio * advantages).mean()
+    if entropy_coef:
+        objective = objective + entropy_coef * dist.entropy().mean()
+    return objective
+
+
+def trpo_update(
+    policy_params: Sequence[Tensor],
+    dist_fn: Callable[[], Distribution],
+    old_dist: Distribution,
+    actions: Tensor,
+    advantages: Tensor,
+    cfg: TRPOConfig | None = None,
+) -> TRPOStats:
+    """One TRPO step: maximise the surrogate subject to ``mean KL(old || new) <= max_kl``, in place on ``policy_params``.
+
+    Natural-gradient direction ``s = (F + damping I)^-1 g`` by conjugate gradient on exact Fisher-vector products of
+    the mean KL, full step ``beta s`` with ``beta = sqrt(2 delta / s^T F s)``, then a backtracking line search that
+    accepts only a step that keeps the exact mean KL within ``delta`` and improves the surrogate (otherwise the
+    parameters are restored).
+
+    Args:
+        policy_params: the trainable tensors; nothing else is changed.
+        dist_fn: recomputes the policy's distribution on the batch's ``B`` states from the current parameter values
+            (a closure such as ``lambda: policy(obs)``).
+        old_dist: the distribution that generated the data (``dist_fn()`` before the update; detached here).
+        actions: ``[B, ...]`` taken actions in the distribution's encoding.
+        advantages: ``[B]`` advantage estimates (standardised here if ``cfg.normalize_advantages``).
+        cfg: settings; ``TRPOConfig()`` if ``None``.
+    """
+    cfg = cfg or TRPOConfig()
+    params = list(policy_params)
+    if not params or not all(p.requires_grad for p in params):
+        raise ValueError("policy_params must be a non-empty list of tensors that require grad")
+    old_dist = old_dist.detach()
+    adv = advantages.detach().reshape(-1)
+    if cfg.normalize_advantages:
+        adv = standardize(adv)
+    old_log_prob = old_dist.log_prob(actions).detach()
+    theta_old = get_flat_params(params)
+
+    dist = dist_fn()
+    surrogate = surrogate_objective(dist, actions, old_log_prob, adv, cfg.entropy_coef)
+    surrogate_before = float(surrogate.detach())
+    entropy_before = float(dist.entropy().mean().detach())
+    g = flat_grad(surrogate, params, retain_graph=True)
+    grad_norm = float(torch.linalg.vector_norm(g))
+
+    def no_step(beta: float = 0.0, residual: float = math.nan, expected: float = 0.0) -> TRPOStats:
+        return TRPOStats(
+            kl=0.0, kl_max=0.0, surrogate_before=surrogate_before, surrogate_after=surrogate_before,
+            expected_improvement=expected, line_search_steps=0, step_fraction=0.0, accepted=False,
+            entropy_before=entropy_before, entropy=entropy_before, grad_norm=grad_norm, step_norm=0.0, beta=beta,
+            cg_relative_residual=residual,
+        )  # fmt: skip
+
+    if not math.isfinite(grad_norm) or grad_norm == 0.0:
+        return no_step()
+
+    # Hessian of KL(dist_fixed || dist) at the current parameters = Fisher matrix (first argument held fixed).
+    fvp = make_fisher_vector_product(lambda: dist.detach().kl(dist).mean(), params, cfg.cg_damping)
+    step_dir = conjugate_gradient(fvp, g, cfg.cg_iters, cfg.cg_residual_tol)
+    f_step_dir = fvp(step_dir)
+    residual = float(torch.linalg.vector_norm(f_step_dir - g)) / grad_norm
+    beta = max_step_length(step_dir, f_step_dir, cfg.max_kl)
+    full_step = beta * step_dir
+    expected = float(torch.dot(g, full_step))
+    if beta == 0.0:
+        return no_step(beta, residual, expected)
+
+    result = backtracking_line_search(
+        params,
+        surrogate_fn=lambda: surrogate_objective(dist_fn(), actions, old_log_prob, adv, cfg.entropy_coef),
+        kl_fn=lambda: old_dist.kl(dist_fn()).mean(),
+        full_step=full_step,
+        max_kl=cfg.max_kl,
+        max_backtracks=cfg.line_search_backtracks,
+        shrink=cfg.line_search_shrink,
+        surrogate_before=surrogate_before,
+    )
+    with torch.no_grad():
+        new_dist = dist_fn()
+        kl = old_dist.kl(new_dist)
+        entropy = float(new_dist.entropy().mean())
+    return TRPOStats(
+        kl=float(kl.mean()),
+        kl_max=float(kl.max()),
+        surrogate_before=surrogate_before,
+        surrogate_after=result.surrogate,
+        expected_improvement=expected,
+        line_search_steps=result.steps_tried,
+        step_fraction=result.step_fraction,
+        accepted=result.accepted,
+        entropy_before=entropy_before,
+        entropy=entropy,
+        grad_norm=grad_norm,
+        step_norm=float(torch.linalg.vector_norm(get_flat_params(params) - theta_old)),
+        beta=beta,
+        cg_relative_residual=residual,
+    )

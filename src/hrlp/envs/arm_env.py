@@ -1,0 +1,165 @@
+"""The Gymnasium environment that joins the arm's physics to one task.
+
+Observation (float64): the paper's 24 base numbers, then the task's extra numbers.
+
+    ======  ==========================================  =====
+    index   meaning                                      unit
+    ======  ==========================================  =====
+    0-8     joint angles (s_abduction ... lc_close)      rad
+    9-17    joint velocities                             rad/s
+    18-20   hand H (capsule centre if gripped)           m
+    21-23   capsule centre C                             m
+    24-26   task extra: Reacher goal / Mover & reach-    m
+            and-move target T (absent for gripping)
+    ======  ==========================================  =====
+
+Action: 9 torques in [-1, 1] (scaled by each motor's gear: 100, 100, 100, 70, 70, 30, 30, 10, 10).
+Reward: the sum of the task's terms, each reported in ``info`` as ``reward_<term>``.
+Episodes end by truncation after ``episode_steps`` steps (the paper: 300-500); tasks never
+terminate early. A physics instability also truncates the episode (``info['physics_unstable']``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS, ArmPhysics, PhysicsConfig
+from hrlp.envs.tasks import Task
+
+log = logging.getLogger(__name__)
+
+
+class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
+    """One of the paper's tasks on the arm with a claw.
+
+    Args:
+        task: the task (start distribution, reward terms, success test).
+        episode_steps: steps before truncation (the paper: 300-500).
+        physics: timestep, substeps and gravity.
+        render_mode: None or 'rgb_array'.
+        width, height, camera: the rendered image's size and the model camera ('front', 'side').
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 100}  # noqa: RUF012 (Gymnasium's convention)
+
+    def __init__(
+        self,
+        task: Task,
+        *,
+        episode_steps: int = 300,
+        physics: PhysicsConfig | None = None,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 360,
+        camera: str = "front",
+    ) -> None:
+        if isinstance(episode_steps, bool) or not isinstance(episode_steps, int) or episode_steps < 1:
+            raise ValueError(f"{task.name}: episode_steps must be a positive integer, got {episode_steps!r}")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"{task.name}: render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.task = task
+        self.episode_steps = episode_steps
+        self.physics = ArmPhysics(physics or PhysicsConfig())
+        self.render_mode = render_mode
+        self._render_args = (width, height, camera)
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.config.control_period)}
+        self.obs_dim = BASE_OBS_DIM + task.extra_obs_dim
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float64)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(N_JOINTS,), dtype=np.float64)
+        self._obs = np.zeros(self.obs_dim)
+        self._rng = np.random.default_rng()
+        self._episodes = 0
+        self._t = 0
+        self._success = False
+        self._sums = [0.0] * len(task.tracked)
+        self._needs_reset = True
+
+    # --- Gymnasium API ------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        """Start an episode from the task's start distribution."""
+        super().reset(seed=seed)
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        p = self.physics
+        p.reset()
+        self.task.reset(p, self._rng, self._episodes)
+        p.forward()
+        self._episodes += 1
+        self._t = 0
+        self._success = self.task.success(p)
+        self._sums = [0.0] * len(self.task.tracked)
+        self._needs_reset = False
+        return self._observe().copy(), {"success": self._success}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Apply 9 torques for one control period (``substeps`` physics steps)."""
+        if self._needs_reset:
+            raise RuntimeError(f"{self.task.name}: call reset() before step() (the episode has ended or not begun)")
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (N_JOINTS,):
+            raise ValueError(f"{self.task.name}: action must have shape ({N_JOINTS},), got {a.shape}")
+        if not math.isfinite(a.sum()) and not np.isfinite(a).all():  # the sum is the cheap check on the hot path
+            raise ValueError(f"{self.task.name}: action contains NaN or inf: {a.tolist()}")
+        p = self.physics
+        self._t += 1
+        if not p.step(a):
+            return self._unstable()
+        terms = self.task.reward_terms(p)
+        if not self._success and self.task.success(p):
+            self._success = True
+        truncated = self._t >= self.episode_steps
+        info: dict[str, Any] = {f"reward_{k}": v for k, v in terms.items()}
+        info["success"] = self._success
+        if self._sums:
+            for i, v in enumerate(self.task.track(p)):
+                self._sums[i] += v
+            for name, v in zip(self.task.tracked, self._sums, strict=True):
+                info[f"{name}_sum"] = v
+        self._needs_reset = truncated
+        return self._observe().copy(), sum(terms.values()), False, truncated, info
+
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
+        """An RGB frame [height, width, 3] when ``render_mode == 'rgb_array'``."""
+        if self.render_mode != "rgb_array":
+            return None
+        return self.physics.render(*self._render_args)
+
+    def close(self) -> None:
+        """Release the renderer."""
+        self.physics.close()
+
+    # --- internals ----------------------------------------------------------------------------
+    def _observe(self) -> np.ndarray:
+        obs = self._obs
+        self.physics.base_observation(obs)
+        if self.task.extra_obs_dim:
+            self.task.extra_observation(self.physics, obs[BASE_OBS_DIM:])
+        return obs
+
+    def _unstable(self) -> tuple[np.ndarray, float, bool, bool, dict]:
+        # MuJoCo reset the state to keep going; continuing from there would silently teleport the
+        # arm, so the episode is cut here and the last good observation is returned.
+        warnings = self.physics.instability_warnings()
+        log.warning("%s: physics became unstable at step %d %s; episode truncated", self.task.name, self._t, warnings)
+        self._needs_reset = True
+        info: dict[str, Any] = {f"reward_{k}": 0.0 for k in self._zero_terms()}
+        info.update(success=self._success, physics_unstable=True, physics_warnings=warnings)
+        return self._obs.copy(), 0.0, False, True, info
+
+    def _zero_terms(self) -> list[str]:
+        return list(self.task.reward_terms(self.physics))
+
+    @property
+    def episodes_started(self) -> int:
+        """How many episodes this environment has started (the curriculum's k)."""
+        return self._episodes
+
+    @property
+    def elapsed_steps(self) -> int:
+        """Steps taken in the current episode."""
+        return self._t

@@ -1,0 +1,319 @@
+"""The arm with a claw: the MuJoCo model and every measurement the tasks use.
+
+Physics is kept apart from tasks (as in dm_control): this module owns the model, the simulation
+state and the named points of the paper (Section 4: "H is the location of the hand (precisely a
+point where the center of the mass of the capsule would be if the capsule were properly gripped
+by the hand) and C is the location of the center of mass of the capsule"), plus finger tips
+FT1/FT2 and the target T. Tasks (``hrlp.envs.tasks``) only read these measurements and place
+the capsule, the target and the arm through the methods below.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from importlib import resources
+
+import mujoco
+import numpy as np
+
+#: Joint names in actuator order (ARM_CLAW facts, joints 1..9).
+JOINTS: tuple[str, ...] = (
+    "s_abduction",
+    "s_flexion",
+    "s_rotation",
+    "e_flexion",
+    "e_pronation",
+    "w_abduction",
+    "w_flexion",
+    "rc_close",
+    "lc_close",
+)
+N_JOINTS = len(JOINTS)
+#: The 7 joints that move the palm; the last two open and close the fingers.
+ARM_JOINTS = 7
+#: Base observation size (paper, Appendix B.1): 9 angles, 9 velocities, hand H, capsule C.
+BASE_OBS_DIM = 2 * N_JOINTS + 3 + 3
+#: The arm's base axis is the vertical line through the shoulder; start circles are centred on it.
+BASE_AXIS_XY = np.array([-0.15, 0.0])
+#: Height of the capsule's centre when it lies on the table (its radius).
+CAPSULE_RADIUS = 0.025
+CAPSULE_REST_Z = CAPSULE_RADIUS
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """Simulation settings shared by every task.
+
+    The defaults are measured choices (docs/environments.md, "Timestep and control period"):
+    a 0.002 s timestep with 5 substeps gives the paper's 0.01 s control period at about twice
+    the speed of the original 0.001 s timestep, with no instability in random-torque rollouts.
+    """
+
+    timestep: float = 0.002
+    """Physics timestep in seconds (the original model used 0.001)."""
+    substeps: int = 5
+    """Physics steps per control step; control period = timestep * substeps."""
+    gravity: bool = True
+    """Gravity 0 0 -9.81 (the original shipped with and without it)."""
+
+    def __post_init__(self) -> None:
+        if not (self.timestep > 0 and math.isfinite(self.timestep)):
+            raise ValueError(f"PhysicsConfig.timestep must be a positive number, got {self.timestep!r}")
+        if int(self.substeps) != self.substeps or self.substeps < 1:
+            raise ValueError(f"PhysicsConfig.substeps must be a positive integer, got {self.substeps!r}")
+
+    @property
+    def control_period(self) -> float:
+        """Seconds of simulated time per control step."""
+        return self.timestep * self.substeps
+
+
+@functools.cache
+def model_xml() -> str:
+    """The MJCF text of the arm (shipped inside the package)."""
+    return resources.files("hrlp.envs").joinpath("assets/arm_claw.xml").read_text()
+
+
+def load_model(config: PhysicsConfig = PhysicsConfig()) -> mujoco.MjModel:
+    """A fresh ``MjModel`` of the arm with the timestep and gravity of ``config``."""
+    model = mujoco.MjModel.from_xml_string(model_xml())
+    model.opt.timestep = config.timestep
+    model.opt.gravity[:] = (0.0, 0.0, -9.81) if config.gravity else (0.0, 0.0, 0.0)
+    return model
+
+
+class PhysicsError(RuntimeError):
+    """Raised when the simulation cannot continue (for example a NaN state was set by hand)."""
+
+
+class ArmPhysics:
+    """The arm's MuJoCo model and data, with the paper's named measurements.
+
+    Measurements are returned as read-only-by-convention views into ``MjData``; copy them if
+    they must outlive the next step.
+    """
+
+    def __init__(self, config: PhysicsConfig = PhysicsConfig()) -> None:
+        self.config = config
+        self.model = load_model(config)
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._joint_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in JOINTS])
+        self._joint_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in JOINTS])
+        # The hinges come first in the model, so contiguous slices avoid fancy-indexing copies.
+        assert (self._joint_qpos == np.arange(N_JOINTS)).all() and (self._joint_dof == np.arange(N_JOINTS)).all()
+        self.joint_range = m.jnt_range[:N_JOINTS].copy()  # [9, 2]
+        obj = m.joint("object")
+        self._obj_qpos = int(m.jnt_qposadr[obj.id])
+        self._obj_dof = int(m.jnt_dofadr[obj.id])
+        self._target_mocap = int(m.body_mocapid[m.body("target").id])
+        self._hand = m.site("hand").id
+        self._tips = (m.site("tip_right").id, m.site("tip_left").id)
+        self._obj_body = m.body("object").id
+        self._forearm_body = m.body("forearm").id
+        self._table = m.geom("table").id
+        self._object_geom = m.geom("object").id
+        self._arm_geoms = frozenset(
+            g for g in range(m.ngeom) if g not in (self._table, self._object_geom, m.geom("target").id)
+        )
+        self._renderer: mujoco.Renderer | None = None
+        mujoco.mj_forward(m, self.data)
+
+    # --- measurements -------------------------------------------------------------------------
+    @property
+    def qpos(self) -> np.ndarray:
+        """Joint angles of the 9 hinges, radians. [9]"""
+        return self.data.qpos[:N_JOINTS]
+
+    @property
+    def qvel(self) -> np.ndarray:
+        """Joint velocities of the 9 hinges, radians/s. [9]"""
+        return self.data.qvel[:N_JOINTS]
+
+    @property
+    def hand(self) -> np.ndarray:
+        """H: where the capsule's centre would be if properly gripped. [3]"""
+        return self.data.site_xpos[self._hand]
+
+    @property
+    def fingertips(self) -> tuple[np.ndarray, np.ndarray]:
+        """FT1, FT2: the far ends of the two fingers. ([3], [3])"""
+        return self.data.site_xpos[self._tips[0]], self.data.site_xpos[self._tips[1]]
+
+    @property
+    def capsule(self) -> np.ndarray:
+        """C: the capsule's centre of mass. [3]"""
+        return self.data.xpos[self._obj_body]
+
+    @property
+    def target(self) -> np.ndarray:
+        """T: the centre of the shadow capsule, where the capsule should be moved. [3]"""
+        return self.data.mocap_pos[self._target_mocap]
+
+    @property
+    def forearm_axis(self) -> np.ndarray:
+        """Unit vector along the forearm, world frame. [3]"""
+        return self.data.xmat[self._forearm_body].reshape(3, 3)[:, 0]
+
+    def finger_gap(self) -> float:
+        """d(FT1, FT2): distance between the finger tips, metres."""
+        a, b = self.fingertips
+        return _dist(a, b)
+
+    def hand_to_capsule(self) -> float:
+        """d(H, C), metres."""
+        return _dist(self.hand, self.capsule)
+
+    def capsule_to_target(self) -> float:
+        """d(C, T), metres."""
+        return _dist(self.capsule, self.target)
+
+    def base_observation(self, out: np.ndarray) -> np.ndarray:
+        """Write the paper's 24 numbers into ``out[:24]``: angles, velocities, H, C."""
+        d = self.data
+        out[0:9] = d.qpos[0:9]
+        out[9:18] = d.qvel[0:9]
+        out[18:21] = d.site_xpos[self._hand]
+        out[21:24] = d.xpos[self._obj_body]
+        return out
+
+    # --- state setting ------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Reset to the model's reference state (arm hanging, capsule at its spawn point)."""
+        mujoco.mj_resetData(self.model, self.data)
+
+    def set_arm(self, qpos: np.ndarray, qvel: np.ndarray | None = None) -> None:
+        """Set the 9 joint angles (clipped to their ranges) and velocities (default zero)."""
+        self.data.qpos[:N_JOINTS] = np.clip(qpos, self.joint_range[:, 0], self.joint_range[:, 1])
+        self.data.qvel[:N_JOINTS] = 0.0 if qvel is None else qvel
+
+    def set_capsule(self, pos: np.ndarray, yaw: float = 0.0) -> None:
+        """Place the capsule lying on its side at ``pos`` with its axis at angle ``yaw`` in the xy-plane."""
+        a = self._obj_qpos
+        self.data.qpos[a : a + 3] = pos
+        # Lying capsule: rotate its z-axis onto the horizontal direction (cos yaw, sin yaw, 0).
+        quat = np.empty(4)
+        half = np.array([0.0, math.pi / 2, 0.0])  # pitch 90 degrees about y puts z along x
+        mujoco.mju_euler2Quat(quat, half, "xyz")
+        yaw_q = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+        out = np.empty(4)
+        mujoco.mju_mulQuat(out, yaw_q, quat)
+        self.data.qpos[a + 3 : a + 7] = out
+        self.data.qvel[self._obj_dof : self._obj_dof + 6] = 0.0
+
+    def set_target(self, pos: np.ndarray, yaw: float = 0.0) -> None:
+        """Place the shadow capsule (target T)."""
+        self.data.mocap_pos[self._target_mocap] = pos
+        quat = np.empty(4)
+        mujoco.mju_euler2Quat(quat, np.array([0.0, math.pi / 2, yaw]), "XYZ")
+        self.data.mocap_quat[self._target_mocap] = quat
+
+    def forward(self) -> None:
+        """Recompute positions (``mj_forward``) after the state was set by hand."""
+        mujoco.mj_forward(self.model, self.data)
+
+    def arm_contacts(self) -> int:
+        """Number of contacts between arm geoms and the table or the capsule (after ``forward``)."""
+        d = self.data
+        n = 0
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if c.dist < 0 and (c.geom1 in self._arm_geoms or c.geom2 in self._arm_geoms):
+                n += 1
+        return n
+
+    # --- stepping -----------------------------------------------------------------------------
+    def step(self, ctrl: np.ndarray) -> bool:
+        """Advance one control period with torques ``ctrl`` in [-1, 1]^9.
+
+        Returns False if MuJoCo hit an instability during the step. MuJoCo then resets the
+        state itself (mj_checkPos/Vel/Acc) and raises a warning counter; we detect it with the
+        simulated clock, which the reset sets back, so the check costs one float comparison.
+        """
+        d = self.data
+        t0 = d.time
+        d.ctrl[:] = ctrl  # MuJoCo clamps to ctrlrange because the motors are ctrllimited.
+        mujoco.mj_step(self.model, d, self.config.substeps)
+        return d.time > t0
+
+    def instability_warnings(self) -> dict[str, int]:
+        """Counts of MuJoCo's instability warnings so far (bad qpos, qvel, qacc)."""
+        w = self.data.warning
+        return {
+            "bad_qpos": int(w[mujoco.mjtWarning.mjWARN_BADQPOS].number),
+            "bad_qvel": int(w[mujoco.mjtWarning.mjWARN_BADQVEL].number),
+            "bad_qacc": int(w[mujoco.mjtWarning.mjWARN_BADQACC].number),
+        }
+
+    # --- kinematics helpers -------------------------------------------------------------------
+    def hand_at(self, qpos: np.ndarray) -> np.ndarray:
+        """H for joint angles ``qpos`` (does not change the current state). [3]"""
+        saved = self.data.qpos.copy()
+        self.data.qpos[:N_JOINTS] = qpos
+        mujoco.mj_kinematics(self.model, self.data)
+        h = self.data.site_xpos[self._hand].copy()
+        self.data.qpos[:] = saved
+        mujoco.mj_kinematics(self.model, self.data)
+        return h
+
+    def solve_hand_ik(
+        self,
+        goal: np.ndarray,
+        q_init: np.ndarray,
+        *,
+        iters: int = 60,
+        tol: float = 0.005,
+        damping: float = 1e-2,
+    ) -> tuple[np.ndarray, float]:
+        """Joint angles that put H at ``goal``: damped least squares over the 7 arm joints.
+
+        Starts from ``q_init`` [9], keeps every joint inside its range, leaves the fingers as
+        given. Returns (qpos [9], final error in metres). Leaves the simulation state unchanged.
+        """
+        m, d = self.model, self.data
+        saved = d.qpos.copy()
+        q = np.clip(np.asarray(q_init, dtype=float), self.joint_range[:, 0], self.joint_range[:, 1])
+        jac = np.zeros((3, m.nv))
+        err = np.inf
+        lo, hi = self.joint_range[:ARM_JOINTS, 0], self.joint_range[:ARM_JOINTS, 1]
+        for _ in range(iters):
+            d.qpos[:N_JOINTS] = q
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            e = goal - d.site_xpos[self._hand]
+            err = float(np.sqrt(e @ e))
+            if err < tol:
+                break
+            mujoco.mj_jacSite(m, d, jac, None, self._hand)
+            j = jac[:, :ARM_JOINTS]
+            dq = j.T @ np.linalg.solve(j @ j.T + damping**2 * np.eye(3), e)
+            q[:ARM_JOINTS] = np.clip(q[:ARM_JOINTS] + dq, lo, hi)
+        d.qpos[:] = saved
+        mujoco.mj_kinematics(m, d)
+        return q, err
+
+    # --- rendering ----------------------------------------------------------------------------
+    def render(self, width: int = 480, height: int = 360, camera: str = "front") -> np.ndarray:
+        """An RGB image [height, width, 3] (uint8) of the current state, rendered off-screen."""
+        if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):
+            if self._renderer is not None:
+                self._renderer.close()
+            self._renderer = mujoco.Renderer(self.model, height=height, width=width)
+        self._renderer.update_scene(self.data, camera=camera)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        """Release the off-screen renderer, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def _dist(a: np.ndarray, b: np.ndarray) -> float:
+    # Faster than np.linalg.norm for 3-vectors; this runs several times per control step.
+    dx = a[0] - b[0]
+    dy = a[1] - b[1]
+    dz = a[2] - b[2]
+    return math.sqrt(dx * dx + dy * dy + dz * dz)

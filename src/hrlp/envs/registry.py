@@ -1,0 +1,116 @@
+"""Every task of the paper as a registered Gymnasium id (``hrlp tasks`` lists them).
+
+``gymnasium.make("hrlp/Gripper-v0", c2=4.0, tr=0.06, episode_steps=500)`` builds an
+:class:`~hrlp.envs.arm_env.ArmEnv`; keyword arguments go to the environment (``episode_steps``,
+``physics``, ``render_mode``, ``width``, ``height``, ``camera``) or, for the rest, to the task.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+
+from hrlp.envs.arm_env import ArmEnv
+from hrlp.envs.tasks import (
+    GripperTask,
+    GripReward,
+    MoverTask,
+    ReachAndGripTask,
+    ReachAndMoveTask,
+    ReacherTask,
+    SparseSuccess,
+    Task,
+)
+
+NAMESPACE = "hrlp"
+_ENV_KWARGS = frozenset(inspect.signature(ArmEnv.__init__).parameters) - {"self", "task"}
+_GRIP_KWARGS = frozenset(f.name for f in dataclasses.fields(GripReward))
+_SPARSE_KWARGS = {"tr1", "tr2"}
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """A registered task: its id, a one-line description, and how to build it."""
+
+    name: str
+    description: str
+    build: Callable[..., Task]
+
+    @property
+    def env_id(self) -> str:
+        """The Gymnasium id, e.g. 'hrlp/Gripper-v0'."""
+        return f"{NAMESPACE}/{self.name}-v0"
+
+
+def _grip(cls: type, **fixed: Any) -> Callable[..., Task]:
+    # Gripping tasks take the reward constants (c1, c2, c3, tr) and the sparse thresholds
+    # (tr1, tr2) as flat keyword arguments, as the paper's tables name them.
+    def build(**kw: Any) -> Task:
+        reward = GripReward(**{k: kw.pop(k) for k in list(kw) if k in _GRIP_KWARGS})
+        sparse = SparseSuccess(**{k: kw.pop(k) for k in list(kw) if k in _SPARSE_KWARGS})
+        return cls(reward=reward, sparse=sparse, **fixed, **kw)
+
+    return build
+
+
+TASKS: dict[str, TaskSpec] = {
+    s.name: s
+    for s in (
+        TaskSpec(
+            "Reacher",
+            "hand to a 3-d goal above a capsule on the table (ReacherNormal)",
+            lambda **kw: ReacherTask(variant="normal", **kw),
+        ),
+        TaskSpec(
+            "ReacherStabilised",
+            "Reacher with a reward for a forearm parallel to the table",
+            lambda **kw: ReacherTask(variant="stabilised", **kw),
+        ),
+        TaskSpec("Reacher3D", "hand to a goal anywhere in the reachable space", lambda **kw: ReacherTask(variant="3d", **kw)),
+        TaskSpec("Gripper", "grip the capsule, palm starting near it (Figure 6 reward)", _grip(GripperTask)),
+        TaskSpec("MoverPlain", "move the capsule to a target, small start set", lambda **kw: MoverTask(variant="plain", **kw)),
+        TaskSpec(
+            "MoverNoised", "move the capsule to a target, large start set", lambda **kw: MoverTask(variant="noised", **kw)
+        ),
+        TaskSpec(
+            "ReachAndGrip1",
+            "reach-and-grip Experiment 1: capsule fixed, palm on a circle",
+            _grip(ReachAndGripTask, experiment=1),
+        ),
+        TaskSpec(
+            "ReachAndGrip2",
+            "reach-and-grip Experiment 2: capsule and palm on the circle independently",
+            _grip(ReachAndGripTask, experiment=2),
+        ),
+        TaskSpec("ReachAndMove", "reach-and-move: capsule fixed, target above it, random arm start", ReachAndMoveTask),
+    )
+}
+
+
+def make(name: str, **kwargs: Any) -> ArmEnv:
+    """Build the task ``name`` (a key of :data:`TASKS`) as an :class:`ArmEnv`.
+
+    Raises ValueError, naming the task, for an unknown name or an unknown or invalid argument.
+    """
+    if name not in TASKS:
+        raise ValueError(f"unknown task {name!r}; known tasks: {', '.join(TASKS)}")
+    env_kw = {k: kwargs.pop(k) for k in list(kwargs) if k in _ENV_KWARGS}
+    try:
+        task = TASKS[name].build(**kwargs)
+    except TypeError as e:  # an unknown keyword reaches a dataclass constructor
+        raise ValueError(f"{name}: invalid argument ({e})") from None
+    return ArmEnv(task, **env_kw)
+
+
+def register_all() -> None:
+    """Register every task under the 'hrlp' namespace (idempotent)."""
+    for spec in TASKS.values():
+        if spec.env_id not in gym.registry:
+            gym.register(
+                id=spec.env_id, entry_point="hrlp.envs.registry:make", kwargs={"name": spec.name}, disable_env_checker=True
+            )

@@ -1,0 +1,510 @@
+"""The paper's tasks on the arm: start distributions, reward terms and success tests.
+
+Each task is a frozen dataclass of its settings (the paper's constants are constructor
+arguments) and implements :class:`Task`. Tasks never step physics; the environment
+(``hrlp.envs.arm_env.ArmEnv``) does, and asks the task for rewards after every step.
+
+Start distributions (docs/environments.md, "Start distributions"). The capsule lies on the
+table with its centre on a circle of radius :data:`CIRCLE_RADIUS` around the arm's base axis
+(the vertical line through the shoulder, x = -0.15, y = 0), which the hand reaches at every angle
+(sampled reachability: ``tests/envs/test_reachability.py``). Hand starts are solved by inverse
+kinematics from random joint angles and rejected if the arm touches the table or the capsule.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hrlp.envs.physics import BASE_AXIS_XY, CAPSULE_REST_Z, N_JOINTS, ArmPhysics
+
+#: Radius (metres) of the circle around the base axis on which capsules and palms start.
+#: Sampling 200k random arm poses puts the hand within 2 cm of the table at every angle for radii
+#: 0.2-0.4 m; 0.3 m sits in the middle of that band.
+CIRCLE_RADIUS = 0.30
+#: Height of the palm's (H's) start circle in the reach-and-grip experiments. At 0.15 m the hand cannot
+#: reach the angles behind the arm (|angle| > 140 degrees); at 0.08 m it reaches all of them.
+PALM_CIRCLE_Z = 0.08
+
+
+def circle_point(angle: float, z: float = CAPSULE_REST_Z, radius: float = CIRCLE_RADIUS) -> np.ndarray:
+    """The point at ``angle`` (radians, 0 = straight ahead along +x) on a circle around the base axis. [3]"""
+    return np.array([BASE_AXIS_XY[0] + radius * math.cos(angle), BASE_AXIS_XY[1] + radius * math.sin(angle), z])
+
+
+@dataclass(frozen=True)
+class SparseSuccess:
+    """Definition 1 (sparse reward): success if at some step d(H, C) < tr1 and d(FT1, FT2) < tr2.
+
+    Defaults: tr1 = 0.05 m (the hand is on the capsule; the capsule's radius is 0.025 m) and
+    tr2 = 0.03 m (the finger tips end about 0.017 m apart around a held capsule, 0.04 m open).
+    """
+
+    tr1: float = 0.05
+    """Threshold on d(H, C), metres."""
+    tr2: float = 0.03
+    """Threshold on d(FT1, FT2), metres."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "tr1", "tr2")
+
+    def __call__(self, physics: ArmPhysics) -> bool:
+        """Whether the current state satisfies both conditions."""
+        return physics.hand_to_capsule() < self.tr1 and physics.finger_gap() < self.tr2
+
+
+class Task(abc.ABC):
+    """What a task owns: its start distribution, reward terms, success test and extra observations."""
+
+    #: Numbers appended after the 24 base observations (e.g. the Reacher's goal).
+    extra_obs_dim: int = 0
+    #: Names of per-step quantities the environment sums over the episode and reports in ``info``.
+    tracked: tuple[str, ...] = ()
+
+    @property
+    def name(self) -> str:
+        """Short task name used in messages."""
+        return type(self).__name__.removesuffix("Task")
+
+    @abc.abstractmethod
+    def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
+        """Set the start state; ``episode`` counts the environment's earlier episodes (for curricula)."""
+
+    @abc.abstractmethod
+    def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
+        """The reward's terms; the reward is their sum."""
+
+    @abc.abstractmethod
+    def success(self, physics: ArmPhysics) -> bool:
+        """Whether the current state counts as success (an episode succeeds if any step does)."""
+
+    def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
+        """Write the task's extra observations into ``out`` [extra_obs_dim] (none by default)."""
+        return None
+
+    def track(self, physics: ArmPhysics) -> tuple[float, ...]:
+        """Per-step values of :attr:`tracked`."""
+        return ()
+
+
+# --- start-state helpers ----------------------------------------------------------------------
+
+
+class StartError(RuntimeError):
+    """A start distribution could not produce a valid state (the arm cannot reach the requested point)."""
+
+
+def random_arm(physics: ArmPhysics, rng: np.random.Generator, *, min_hand_z: float = 0.08, tries: int = 200) -> None:
+    """Random joint angles (uniform over the ranges, fingers open) with the arm clear of table and capsule."""
+    lo, hi = physics.joint_range[:, 0], physics.joint_range[:, 1]
+    for _ in range(tries):
+        q = rng.uniform(lo, hi)
+        q[7:] = 0.0
+        physics.set_arm(q)
+        physics.forward()
+        if physics.hand[2] >= min_hand_z and physics.arm_contacts() == 0:
+            return
+    raise StartError(f"no collision-free random arm pose with the hand above {min_hand_z} m in {tries} tries")
+
+
+def arm_with_hand_at(
+    physics: ArmPhysics,
+    rng: np.random.Generator,
+    goal: np.ndarray | Callable[[], np.ndarray],
+    *,
+    tol: float = 0.01,
+    tries: int = 40,
+) -> np.ndarray:
+    """Put H at ``goal`` (within ``tol``) by inverse kinematics from random joint angles, arm clear of contacts.
+
+    ``goal`` may be a callable that draws a new goal for each try (a start region rather than a
+    point). Returns the goal reached. Raises :class:`StartError` if no try succeeds.
+    """
+    lo, hi = physics.joint_range[:, 0], physics.joint_range[:, 1]
+    best = np.inf
+    for _ in range(tries):
+        g = goal() if callable(goal) else goal
+        q0 = rng.uniform(lo, hi)
+        q0[7:] = 0.0
+        q, err = physics.solve_hand_ik(g, q0, tol=tol / 2)
+        best = min(best, err)
+        if err > tol:
+            continue
+        physics.set_arm(q)
+        physics.forward()
+        if physics.arm_contacts() == 0:
+            return g
+    raise StartError(f"the hand cannot reach {np.round(g, 3).tolist()} without contact (best error {best:.3f} m)")
+
+
+def is_reachable(
+    physics: ArmPhysics, point: np.ndarray, rng: np.random.Generator, *, tol: float = 0.01, tries: int = 20
+) -> bool:
+    """Whether some joint configuration puts H within ``tol`` of ``point`` (IK from random starts, contacts ignored)."""
+    lo, hi = physics.joint_range[:, 0], physics.joint_range[:, 1]
+    return any(physics.solve_hand_ik(point, rng.uniform(lo, hi), tol=tol / 2)[1] < tol for _ in range(tries))
+
+
+def _upper_offset(rng: np.random.Generator, r_min: float, r_max: float, lift: float = 0.5) -> np.ndarray:
+    """A random offset of length U(r_min, r_max) pointing into the upper half-space."""
+    direction = rng.normal(size=3)
+    direction[2] = abs(direction[2]) + lift  # away from the table
+    return rng.uniform(r_min, r_max) * direction / np.linalg.norm(direction)
+
+
+def _angle(rng: np.random.Generator, half_width: float) -> float:
+    return float(rng.uniform(-half_width, half_width)) if half_width > 0 else 0.0
+
+
+def _place_capsule(physics: ArmPhysics, angle: float) -> np.ndarray:
+    c = circle_point(angle)
+    physics.set_capsule(c, yaw=angle + math.pi / 2)  # axis tangent to the circle
+    return c
+
+
+def _hide_target(physics: ArmPhysics) -> None:
+    # Tasks without a target park the shadow capsule out of view (it never collides).
+    physics.set_target(np.array([0.0, 0.0, -1.0]))
+
+
+def _positive(obj: object, *names: str) -> None:
+    for n in names:
+        v = getattr(obj, n)
+        if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+            raise ValueError(f"{type(obj).__name__}.{n} must be a positive number, got {v!r}")
+
+
+def _nonneg(obj: object, *names: str) -> None:
+    for n in names:
+        v = getattr(obj, n)
+        if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+            raise ValueError(f"{type(obj).__name__}.{n} must be a non-negative number, got {v!r}")
+
+
+# --- Reacher ----------------------------------------------------------------------------------
+
+REACHER_VARIANTS = ("normal", "stabilised", "3d")
+
+
+@dataclass
+class ReacherTask(Task):
+    """Reacher (Section 4.1, Experiment 3; Section 4.2.2): bring the hand H to a 3-d goal.
+
+    Reward: -d(H, goal), plus for the Stabilised variant -level_coeff * |z-component of the
+    forearm's axis| (zero when the forearm is parallel to the table). The goal is appended to the
+    observation (obs[24:27]); as a skill, this goal is the parameter the Manager passes.
+
+    Variants (start distributions):
+      - normal: the capsule lies on the table at a random angle on the circle; the goal is a
+        point 0-6 cm above its centre (the paper: "moving hand to the location of the capsule").
+      - stabilised: as normal, with the forearm-level reward term.
+      - 3d: the goal is the hand position of a random collision-free arm pose with the hand
+        at least 5 cm above the table, so it is reachable by construction; the capsule lies on
+        the circle at a random angle.
+    The arm starts in a random collision-free pose. Success: d(H, goal) < success_tol.
+    """
+
+    variant: str = "normal"
+    """One of 'normal', 'stabilised', '3d'."""
+    level_coeff: float = 0.5
+    """Weight of the forearm-level term (stabilised variant only)."""
+    success_tol: float = 0.03
+    """A step succeeds when d(H, goal) is below this, metres."""
+    goal: np.ndarray = field(default_factory=lambda: np.zeros(3), init=False, compare=False, repr=False)
+    """The current episode's goal (episode state, set by ``reset``). [3]"""
+    extra_obs_dim = 3
+
+    def __post_init__(self) -> None:
+        if self.variant not in REACHER_VARIANTS:
+            raise ValueError(f"ReacherTask.variant must be one of {REACHER_VARIANTS}, got {self.variant!r}")
+        _nonneg(self, "level_coeff")
+        _positive(self, "success_tol")
+
+    @property
+    def name(self) -> str:
+        return {"normal": "Reacher", "stabilised": "ReacherStabilised", "3d": "Reacher3D"}[self.variant]
+
+    def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
+        _hide_target(physics)
+        c = _place_capsule(physics, _angle(rng, math.pi))
+        if self.variant == "3d":
+            random_arm(physics, rng, min_hand_z=0.05)
+            self.goal[:] = physics.hand
+        else:
+            self.goal[:] = c + np.array([0.0, 0.0, rng.uniform(0.0, 0.06)])
+        random_arm(physics, rng)
+
+    def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
+        h, g = physics.hand, self.goal
+        terms = {"distance": -math.dist(h, g)}
+        if self.variant == "stabilised":
+            terms["level"] = -self.level_coeff * abs(float(physics.forearm_axis[2]))
+        return terms
+
+    def success(self, physics: ArmPhysics) -> bool:
+        return math.dist(physics.hand, self.goal) < self.success_tol
+
+    def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
+        out[:] = self.goal
+
+
+# --- Gripper and reach-and-grip -----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GripReward:
+    """The Gripper's reward (Section 4.1, Experiment 1): c1 d(H,C) + c2 1[d(H,C) < tr] + c3 d(FT1,FT2).
+
+    Requires c1, c3 < 0 < c2 and tr > 0. Defaults are the best cell of the paper's grid
+    (Figure 6: c2 = 3, tr = 0.03) with the flat runs' c1 = -1 and c3 = -4 (Section 4.3.2).
+    """
+
+    c1: float = -1.0
+    """Weight of d(H, C) (negative)."""
+    c2: float = 3.0
+    """Bonus while d(H, C) < tr (positive)."""
+    c3: float = -4.0
+    """Weight of d(FT1, FT2) (negative: closing the claw is rewarded)."""
+    tr: float = 0.03
+    """Distance threshold of the bonus, metres."""
+
+    def __post_init__(self) -> None:
+        for n in ("c1", "c2", "c3", "tr"):
+            v = getattr(self, n)
+            if not (isinstance(v, int | float) and math.isfinite(v)):
+                raise ValueError(f"grip reward {n} must be a finite number, got {v!r}")
+        if not (self.c1 < 0 and self.c3 < 0 < self.c2):
+            raise ValueError(f"grip reward needs c1, c3 < 0 < c2, got c1={self.c1}, c2={self.c2}, c3={self.c3}")
+        _positive(self, "tr")
+
+    def terms(self, physics: ArmPhysics) -> dict[str, float]:
+        """The three terms for the current state."""
+        d = physics.hand_to_capsule()
+        return {
+            "distance": self.c1 * d,
+            "bonus": self.c2 if d < self.tr else 0.0,
+            "fingers": self.c3 * physics.finger_gap(),
+        }
+
+
+@dataclass(frozen=True)
+class GripperTask(Task):
+    """Gripper (Section 4.1, Experiment 1): grip the capsule with the palm starting close to it.
+
+    Start: the capsule lies on the circle at a random angle in [-angle_range, angle_range]; H
+    starts at a random point 5-9 cm from the capsule's centre in the upper half-space, fingers
+    open, the claw clear of the capsule (closer starts put a finger inside the capsule).
+    Reward: :class:`GripReward`. Success: :class:`SparseSuccess` (Definition 1).
+    """
+
+    reward: GripReward = GripReward()
+    """Reward constants c1, c2, c3, tr."""
+    sparse: SparseSuccess = SparseSuccess()
+    """Definition 1 thresholds."""
+    angle_range: float = math.pi
+    """Half-width of the capsule's start angle, radians (pi: the full circle)."""
+
+    def __post_init__(self) -> None:
+        _nonneg(self, "angle_range")
+
+    def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
+        _hide_target(physics)
+        c = _place_capsule(physics, _angle(rng, self.angle_range))
+        arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, 0.05, 0.09))
+
+    def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
+        return self.reward.terms(physics)
+
+    def success(self, physics: ArmPhysics) -> bool:
+        return self.sparse(physics)
+
+
+@dataclass(frozen=True)
+class ReachAndGripTask(Task):
+    """reach-and-grip (Section 4.3): reach the capsule from afar and grip it.
+
+    Experiment 1: the capsule is fixed (angle 0 on the circle); H starts on the palm circle (same
+    radius, 8 cm above the table) at a random angle. Experiment 2: the capsule's angle and the
+    palm's angle are drawn independently. Angles are uniform in [-w, w] with w = pi (the full
+    circle), or, with the flat-baseline curriculum of Section 4.3.2, w = min(pi, k * alpha) after
+    the k-th episode of this environment. Reward: :class:`GripReward`. Success: Definition 1.
+    """
+
+    experiment: int = 1
+    """1 (capsule fixed) or 2 (capsule and palm independent)."""
+    reward: GripReward = GripReward()
+    """Reward constants c1, c2, c3, tr."""
+    sparse: SparseSuccess = SparseSuccess()
+    """Definition 1 thresholds."""
+    curriculum_alpha: float | None = None
+    """Curriculum step alpha (radians per episode); None draws from the full circle from the start."""
+
+    def __post_init__(self) -> None:
+        if self.experiment not in (1, 2):
+            raise ValueError(f"ReachAndGripTask.experiment must be 1 or 2, got {self.experiment!r}")
+        if self.curriculum_alpha is not None:
+            _positive(self, "curriculum_alpha")
+
+    @property
+    def name(self) -> str:
+        return f"ReachAndGrip{self.experiment}"
+
+    def angle_half_width(self, episode: int) -> float:
+        """w = min(pi, k * alpha) after the k-th episode (pi without a curriculum)."""
+        if self.curriculum_alpha is None:
+            return math.pi
+        return min(math.pi, episode * self.curriculum_alpha)
+
+    def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
+        _hide_target(physics)
+        w = self.angle_half_width(episode)
+        _place_capsule(physics, _angle(rng, w) if self.experiment == 2 else 0.0)
+        arm_with_hand_at(physics, rng, circle_point(_angle(rng, w), z=PALM_CIRCLE_Z))
+
+    def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
+        return self.reward.terms(physics)
+
+    def success(self, physics: ArmPhysics) -> bool:
+        return self.sparse(physics)
+
+
+# --- Mover and reach-and-move -------------------------------------------------------------------
+
+MOVER_VARIANTS = ("plain", "noised")
+
+
+@dataclass(frozen=True)
+class MoverTask(Task):
+    """Mover (Section 4.1, Experiment 2): move the capsule to the target T, palm starting near it.
+
+    Reward: -hand_coeff d(H, C) - target_coeff d(C, T). The target is appended to the
+    observation (obs[24:27]); as a skill, it is the parameter the Manager passes.
+    Start sets:
+      - plain (small): capsule angle in [-0.2, 0.2] rad, H 5.5-6.5 cm above the capsule's centre
+        (within 1 cm horizontally), target 10 cm above the capsule's start, jittered by up to
+        2 cm per axis.
+      - noised (large): capsule anywhere on the circle, H 5-10 cm from the capsule's centre
+        (upper half-space), target 5-20 cm above the capsule's start, shifted up to 8 cm
+        horizontally; targets the hand cannot reach (high ones behind the arm) are redrawn.
+    Closer hand starts put a finger inside the capsule, so 5 cm is the nearest clear start.
+    Success: d(C, T) < success_tol. Tracks d(C, T) so the episode's TargetDistSum is reported.
+    """
+
+    variant: str = "plain"
+    """'plain' or 'noised'."""
+    hand_coeff: float = 1.0
+    """Weight of d(H, C)."""
+    target_coeff: float = 1.0
+    """Weight of d(C, T)."""
+    success_tol: float = 0.03
+    """A step succeeds when d(C, T) is below this, metres."""
+    extra_obs_dim = 3
+    tracked = ("target_dist",)
+
+    def __post_init__(self) -> None:
+        if self.variant not in MOVER_VARIANTS:
+            raise ValueError(f"MoverTask.variant must be one of {MOVER_VARIANTS}, got {self.variant!r}")
+        _nonneg(self, "hand_coeff", "target_coeff")
+        _positive(self, "success_tol")
+
+    @property
+    def name(self) -> str:
+        return {"plain": "MoverPlain", "noised": "MoverNoised"}[self.variant]
+
+    def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
+        if self.variant == "plain":
+            c = _place_capsule(physics, _angle(rng, 0.2))
+            hand = lambda: c + np.array([*rng.uniform(-0.01, 0.01, size=2), rng.uniform(0.055, 0.065)])  # noqa: E731
+            target = c + np.array([0.0, 0.0, 0.10]) + rng.uniform(-0.02, 0.02, size=3)
+        else:
+            c = _place_capsule(physics, _angle(rng, math.pi))
+            hand = lambda: c + _upper_offset(rng, 0.05, 0.10, lift=0.3)  # noqa: E731
+            for _ in range(50):  # behind the arm the hand reaches only low targets: reject the rest
+                target = c + np.array([*rng.uniform(-0.08, 0.08, size=2), rng.uniform(0.05, 0.20)])
+                if is_reachable(physics, target, rng):
+                    break
+            else:
+                raise StartError(f"no reachable target above the capsule at {np.round(c, 3).tolist()}")
+        physics.set_target(target)
+        arm_with_hand_at(physics, rng, hand)
+
+    def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
+        return {
+            "reach": -self.hand_coeff * physics.hand_to_capsule(),
+            "move": -self.target_coeff * physics.capsule_to_target(),
+        }
+
+    def success(self, physics: ArmPhysics) -> bool:
+        return physics.capsule_to_target() < self.success_tol
+
+    def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
+        out[:] = physics.target
+
+    def track(self, physics: ArmPhysics) -> tuple[float, ...]:
+        return (-physics.capsule_to_target(),)
+
+
+@dataclass(frozen=True)
+class ReachAndMoveTask(Task):
+    """reach-and-move (Section 4.2): reach the capsule and move it to the fixed target above it.
+
+    Start: the capsule is fixed (angle 0 on the circle), the target fixed ``target_height`` above
+    it, the arm in a random collision-free pose. Reward: -d(H, C) - TargetCoeff d(C, T). The
+    episode's TargetDistSum = sum_t -d(C, T) is reported in ``info['target_dist_sum']``. The
+    target is appended to the observation (obs[24:27]) so a Manager can pass it to a Mover.
+    Success: d(C, T) < success_tol.
+    """
+
+    target_coeff: float = 1.0
+    """TargetCoeff, the weight of d(C, T)."""
+    target_height: float = 0.15
+    """Height of the target above the capsule's centre, metres."""
+    success_tol: float = 0.03
+    """A step succeeds when d(C, T) is below this, metres."""
+    extra_obs_dim = 3
+    tracked = ("target_dist",)
+
+    def __post_init__(self) -> None:
+        _nonneg(self, "target_coeff")
+        _positive(self, "target_height", "success_tol")
+
+    def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
+        c = _place_capsule(physics, 0.0)
+        physics.set_target(c + np.array([0.0, 0.0, self.target_height]))
+        random_arm(physics, rng)
+
+    def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
+        return {"reach": -physics.hand_to_capsule(), "move": -self.target_coeff * physics.capsule_to_target()}
+
+    def success(self, physics: ArmPhysics) -> bool:
+        return physics.capsule_to_target() < self.success_tol
+
+    def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
+        out[:] = physics.target
+
+    def track(self, physics: ArmPhysics) -> tuple[float, ...]:
+        return (-physics.capsule_to_target(),)
+
+
+__all__ = [
+    "CIRCLE_RADIUS",
+    "N_JOINTS",
+    "PALM_CIRCLE_Z",
+    "GripReward",
+    "GripperTask",
+    "MoverTask",
+    "ReachAndGripTask",
+    "ReachAndMoveTask",
+    "ReacherTask",
+    "SparseSuccess",
+    "StartError",
+    "Task",
+    "arm_with_hand_at",
+    "circle_point",
+    "is_reachable",
+    "random_arm",
+]

@@ -1,0 +1,203 @@
+"""Invariants over every registered task (as dm_control's suite test), plus each task's specifics."""
+
+import logging
+import math
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import hrlp.envs  # noqa: F401  (registers the ids)
+from hrlp.envs import TASKS, make
+from hrlp.envs.tasks import GripReward, ReachAndGripTask, SparseSuccess
+
+NAMES = list(TASKS)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_gymnasium_env_checker_passes(name):
+    env = gym.make(f"hrlp/{name}-v0", episode_steps=20).unwrapped
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        # Joint velocities and positions in space are unbounded, as in Gymnasium's own MuJoCo tasks.
+        warnings.filterwarnings("ignore", message=".*Box observation space (minimum|maximum) value is")
+        check_env(env, skip_render_check=True)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_reward_is_the_sum_of_its_terms_and_episode_truncates(name):
+    env = make(name, episode_steps=40)
+    obs, info = env.reset(seed=3)
+    assert obs.shape == env.observation_space.shape and np.isfinite(obs).all()
+    assert isinstance(info["success"], bool)
+    rng = np.random.default_rng(0)
+    for t in range(1, 41):
+        obs, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, 9))
+        terms = {k: v for k, v in info.items() if k.startswith("reward_")}
+        assert terms, "every reward reports its terms"
+        assert reward == pytest.approx(sum(terms.values()), abs=1e-12)
+        assert not terminated
+        assert truncated == (t == 40)
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(np.zeros(9))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_same_seed_gives_the_same_episode(name):
+    def episode(seed):
+        env = make(name, episode_steps=25)
+        obs, _ = env.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        out = [obs]
+        for _ in range(25):
+            obs, r, *_ = env.step(rng.uniform(-1, 1, 9))
+            out.append(np.append(obs, r))
+        return np.concatenate(out)
+
+    a, b, c = episode(7), episode(7), episode(8)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_bad_actions_raise_clear_errors_naming_the_task(name):
+    env = make(name)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=rf"{TASKS[name].build().name}: action must have shape \(9,\), got \(8,\)"):
+        env.step(np.zeros(8))
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(np.full(9, np.nan))
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(np.array([0, 0, 0, np.inf, 0, 0, 0, 0, 0]))
+    # A huge finite action is valid (the motors clamp it to [-1, 1]).
+    env.step(np.full(9, 1e300))
+
+
+def test_physics_blow_up_truncates_with_a_flag_and_a_logged_warning(caplog):
+    env = make("Gripper")
+    _obs0, _ = env.reset(seed=0)
+    obs1, *_ = env.step(np.zeros(9))
+    env.physics.data.qvel[:] = 1e12
+    with caplog.at_level(logging.WARNING, logger="hrlp.envs.arm_env"):
+        obs, reward, terminated, truncated, info = env.step(np.zeros(9))
+    assert truncated and not terminated and info["physics_unstable"]
+    assert "unstable" in caplog.text
+    np.testing.assert_array_equal(obs, obs1)  # the last good observation, not MuJoCo's reset state
+    assert reward == sum(v for k, v in info.items() if k.startswith("reward_"))
+    with pytest.raises(RuntimeError):
+        env.step(np.zeros(9))
+
+
+@pytest.mark.parametrize(
+    ("name", "kwargs", "match"),
+    [
+        ("Gripper", {"c1": 1.0}, "c1, c3 < 0 < c2"),
+        ("Gripper", {"c2": -3.0}, "c1, c3 < 0 < c2"),
+        ("Gripper", {"tr": 0.0}, "tr must be a positive"),
+        ("ReachAndGrip2", {"tr1": -0.1}, "tr1 must be a positive"),
+        ("ReachAndGrip1", {"curriculum_alpha": -1.0}, "curriculum_alpha"),
+        ("Reacher", {"success_tol": math.nan}, "success_tol"),
+        ("ReachAndMove", {"target_coeff": -1.0}, "target_coeff"),
+        ("MoverPlain", {"bogus": 1}, "MoverPlain: invalid argument"),
+        ("Gripper", {"episode_steps": 0}, "episode_steps must be a positive integer"),
+        ("Nope", {}, "unknown task 'Nope'"),
+    ],
+)
+def test_bad_task_arguments_fail_before_any_compute(name, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        make(name, **kwargs)
+
+
+def test_gripper_reward_constants_are_constructor_arguments():
+    env = make("Gripper", c1=-2.0, c2=4.0, c3=-1.0, tr=10.0)  # tr large: the bonus is always on
+    env.reset(seed=0)
+    _, _r, _, _, info = env.step(np.zeros(9))
+    d, gap = env.physics.hand_to_capsule(), env.physics.finger_gap()
+    assert info["reward_bonus"] == 4.0
+    assert info["reward_distance"] == pytest.approx(-2.0 * d)
+    assert info["reward_fingers"] == pytest.approx(-1.0 * gap)
+
+
+def test_sparse_success_follows_definition_1_and_latches():
+    env = make("Gripper", tr1=10.0, tr2=10.0)  # thresholds that every state meets
+    _, info = env.reset(seed=0)
+    assert info["success"]
+    env = make("Gripper", tr1=1e-6, tr2=1e-6)  # thresholds no state meets
+    env.reset(seed=0)
+    assert not any(env.step(np.zeros(9))[4]["success"] for _ in range(5))
+    check = SparseSuccess(tr1=0.05, tr2=0.03)
+    env = make("Gripper")
+    env.reset(seed=0)
+    p = env.physics
+    assert check(p) == (p.hand_to_capsule() < 0.05 and p.finger_gap() < 0.03)
+
+
+def test_target_dist_sum_is_the_sum_of_minus_d_c_t():
+    env = make("ReachAndMove", episode_steps=30, target_coeff=2.0)
+    env.reset(seed=0)
+    total = 0.0
+    for _ in range(30):
+        _, _r, _, _, info = env.step(np.zeros(9))
+        d = env.physics.capsule_to_target()
+        total -= d
+        assert info["reward_move"] == pytest.approx(-2.0 * d)
+        assert info["target_dist_sum"] == pytest.approx(total)
+    # The target sits above the fixed capsule: 15 cm at the start.
+    assert env.physics.target[2] - 0.025 == pytest.approx(0.15)
+
+
+def test_curriculum_grows_the_start_angle_by_alpha_per_episode():
+    task = ReachAndGripTask(experiment=2, curriculum_alpha=0.1)
+    assert [task.angle_half_width(k) for k in (0, 1, 5)] == pytest.approx([0.0, 0.1, 0.5])
+    assert task.angle_half_width(10_000) == pytest.approx(math.pi)
+    env = make("ReachAndGrip2", curriculum_alpha=0.05)
+    angles = []
+    for k in range(30):
+        env.reset(seed=k)
+        c = env.physics.capsule
+        angles.append(abs(math.atan2(c[1], c[0] + 0.15)))
+        assert angles[-1] <= k * 0.05 + 1e-9
+    assert max(angles) > 0.3  # it does widen
+    assert ReachAndGripTask(experiment=1).angle_half_width(0) == pytest.approx(math.pi)
+
+
+def test_reach_and_grip_experiment_1_fixes_the_capsule_and_experiment_2_does_not():
+    def capsules(name):
+        env = make(name)
+        return np.array([env.reset(seed=s)[0][21:24] for s in range(6)])
+
+    c1, c2 = capsules("ReachAndGrip1"), capsules("ReachAndGrip2")
+    assert np.ptp(c1[:, :2], axis=0).max() < 1e-9
+    assert np.ptp(c2[:, :2], axis=0).max() > 0.1
+
+
+def test_task_parameters_enter_the_observation():
+    env = make("Reacher")
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_array_equal(obs[24:27], env.task.goal)
+    env = make("MoverNoised")
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_array_equal(obs[24:27], env.physics.target)
+
+
+def test_stabilised_reacher_rewards_a_level_forearm():
+    env = make("ReacherStabilised", level_coeff=0.5)
+    env.reset(seed=0)
+    p = env.physics
+    q = np.zeros(9)  # hanging upper arm, forearm straight forward: level
+    p.set_arm(q)
+    p.forward()
+    assert env.task.reward_terms(p)["level"] == pytest.approx(0.0, abs=1e-9)
+    q[3] = 1.0  # bend the elbow: the forearm tilts
+    p.set_arm(q)
+    p.forward()
+    assert env.task.reward_terms(p)["level"] == pytest.approx(-0.5 * math.sin(1.0), abs=1e-6)
+
+
+def test_gripper_grid_values_of_the_paper_are_accepted():
+    for c2 in (3.0, 4.0):
+        for tr in (0.03, 0.06):
+            assert make("Gripper", c2=c2, tr=tr).task.reward == GripReward(c2=c2, tr=tr)
+    assert make("ReachAndGrip2", tr=0.08, c1=-1, c2=2.1, c3=-4).task.reward.c2 == 2.1
