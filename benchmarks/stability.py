@@ -18,8 +18,13 @@ import numpy as np
 
 from hrlp.envs import PhysicsConfig, make
 
-SETTINGS = [("euler", 0.002, 5), ("implicitfast", 0.002, 5), ("euler", 0.001, 10), ("rk4", 0.002, 5),
-            ("implicitfast", 0.005, 2)]
+SETTINGS = [
+    ("euler", 0.002, 5),
+    ("implicitfast", 0.002, 5),
+    ("euler", 0.001, 10),
+    ("rk4", 0.002, 5),
+    ("implicitfast", 0.005, 2),
+]
 
 
 def main() -> None:
