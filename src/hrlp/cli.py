@@ -41,25 +41,36 @@ def tasks() -> None:
 
 @app.command()
 def render(
-    task: Annotated[str, typer.Argument(help="Task name or id, e.g. Gripper or hrlp/Gripper-v0.")],
+    source: Annotated[str, typer.Argument(help="A task (random policy), e.g. Gripper, or a run directory (trained policy).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Video file to write (.mp4 or .gif).")] = Path("rollout.mp4"),
     steps: Annotated[int, typer.Option(help="Control steps to record (default: one episode).")] = 0,
-    seed: Annotated[int, typer.Option(help="Seed of the start state and the random actions.")] = 0,
+    seed: Annotated[int, typer.Option(help="Seed of the start state and the actions.")] = 0,
     width: Annotated[int, typer.Option(help="Frame width in pixels.")] = 480,
     height: Annotated[int, typer.Option(help="Frame height in pixels.")] = 360,
     camera: Annotated[str, typer.Option(help="Model camera: front or side.")] = "front",
 ) -> None:
-    """Record a rollout of a task with a random policy to a video file, off-screen."""
+    """Record a rollout to a video file, off-screen: a task with random actions, or a trained run's policy."""
     import numpy as np
+    import torch
     from rich.progress import track
 
     from hrlp.envs import TASKS, make
     from hrlp.video import check_video_path, write_video
 
-    name = task.removeprefix("hrlp/").removesuffix("-v0")
+    rng = np.random.default_rng(seed)
+    act = lambda obs: rng.uniform(-1.0, 1.0, size=9)  # noqa: E731
     try:
+        if Path(source).is_dir():
+            from hrlp.train import TrainConfig, load_policy
+
+            policy, normalizer, meta = load_policy(Path(source) / "checkpoint")
+            cfg = TrainConfig.from_json(meta["config"])
+            source = cfg.task
+            gen = torch.Generator().manual_seed(seed)
+            act = lambda obs: policy.act_numpy(normalizer(obs, update=False).astype(np.float32), gen, True)  # noqa: E731
+        name = source.removeprefix("hrlp/").removesuffix("-v0")
         if name not in TASKS:
-            raise ValueError(f"unknown task {task!r}; run 'hrlp tasks' to list them")
+            raise ValueError(f"unknown task {source!r}; run 'hrlp tasks' to list them (only hrlp tasks render)")
         if steps < 0 or width < 16 or height < 16:
             raise ValueError("--steps must be >= 0 and --width/--height >= 16")
         if camera not in ("front", "side"):
@@ -69,16 +80,16 @@ def render(
         raise _fail(str(e)) from None
     env = make(name, render_mode="rgb_array", width=width, height=height, camera=camera)
     n = steps or env.episode_steps
-    rng = np.random.default_rng(seed)
-    env.reset(seed=seed)
+    obs, _ = env.reset(seed=seed)
 
     def frames():
+        nonlocal obs
         yield env.render()
         for _ in track(range(n), description=f"rendering {name}", console=err_console, transient=True):
-            _, _, terminated, truncated, _ = env.step(rng.uniform(-1.0, 1.0, size=9))
+            obs, _, terminated, truncated, _ = env.step(np.clip(act(obs), -1.0, 1.0))
             yield env.render()
             if terminated or truncated:
-                env.reset()
+                obs, _ = env.reset()
 
     count = write_video(out, frames(), fps=env.metadata["render_fps"])
     env.close()
@@ -97,6 +108,72 @@ def theory(
     if mdps <= 0:
         raise _fail(f"--mdps must be a positive integer, got {mdps}")
     run_theory(mdps=mdps, seed=seed, out_dir=out, console=console)
+
+
+@app.command()
+def train(
+    task: Annotated[str, typer.Argument(help="hrlp task (see 'hrlp tasks') or a Gymnasium id with a Box action space.")],
+    steps: Annotated[int, typer.Option(help="Environment steps in total.")] = 1_000_000,
+    seed: Annotated[int, typer.Option(help="Seed of environments, network and action noise.")] = 0,
+    run_dir: Annotated[Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).")] = None,
+    batch_steps: Annotated[int, typer.Option(help="Environment steps per TRPO iteration (paper: 50,000).")] = 50_000,
+    num_envs: Annotated[int, typer.Option(help="Environments stepped together with batched inference.")] = 16,
+    max_kl: Annotated[float, typer.Option(help="TRPO's trust region, the maximal mean KL per step.")] = 0.01,
+    gamma: Annotated[float, typer.Option(help="Discount factor.")] = 0.99,
+    episode_steps: Annotated[int | None, typer.Option(help="Episode length of hrlp tasks (default 300).")] = None,
+) -> None:
+    """Train a flat TRPO policy; logs to progress.csv and TensorBoard, checkpoints after every iteration."""
+    import dataclasses
+    import math
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from hrlp.algos.trpo import TRPOConfig
+    from hrlp.train import TrainConfig, env_factory
+    from hrlp.train import train as run_training
+
+    try:
+        cfg = TrainConfig(task=task, steps=steps, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
+                          episode_steps=episode_steps,
+                          trpo=dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma))  # fmt: skip
+        env_factory(cfg.task, cfg.episode_steps)
+    except ValueError as e:
+        raise _fail(str(e)) from None
+    out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{seed}"
+    columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+               TextColumn("{task.fields[status]}")]  # fmt: skip
+    with Progress(*columns, console=err_console) as progress:
+        bar = progress.add_task(f"train {task}", total=cfg.iterations * cfg.steps_per_env * cfg.num_envs, status="")
+        for st in run_training(cfg, out):
+            status = f"return {st['return_mean']:.1f}"
+            if not math.isnan(st["success_rate"]):
+                status += f"  success {st['success_rate']:.2f}"
+            status += f"  kl {st['trpo/kl']:.4f}  {st['time/steps_per_s']:.0f} steps/s"
+            progress.update(bar, completed=st["env_steps"], status=status)
+    console.print(f"run written to {out} (checkpoint: {out / 'checkpoint'}, logs: progress.csv, tb/)")
+
+
+@app.command("eval")
+def eval_(
+    run_dir: Annotated[Path, typer.Argument(help="A run directory written by 'hrlp train'.")],
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes.")] = 20,
+    seed: Annotated[int, typer.Option(help="Seed of the evaluation episodes.")] = 10_000,
+    stochastic: Annotated[bool, typer.Option(help="Sample actions instead of taking the mean.")] = False,
+) -> None:
+    """Mean return and success rate of a trained policy, with 95% confidence intervals."""
+    from hrlp.checkpoint import CheckpointError
+    from hrlp.evaluate import evaluate_run
+
+    try:
+        ev = evaluate_run(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic)
+    except (ValueError, CheckpointError, FileNotFoundError) as e:
+        raise _fail(str(e)) from None
+    console.print(f"episodes: {ev.episodes}")
+    console.print(f"return (mean, 95% CI): {ev.ret}")
+    if ev.success is not None:
+        console.print(f"success rate (95% Wilson CI): {ev.success}")
+    if ev.target_dist_sum is not None:
+        console.print(f"TargetDistSum (mean, 95% CI): {ev.target_dist_sum}")
 
 
 def main() -> None:

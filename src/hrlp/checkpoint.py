@@ -1,0 +1,360 @@
+"""Checkpoints on disk: tensors in safetensors, everything else in JSON, never pickle.
+
+A checkpoint is a directory holding two files:
+
+* ``weights.safetensors`` -- every tensor (contiguous, CPU), parsed only by the safetensors reader, so a file from
+  someone else can never run code on load (``torch.load`` and ``pickle`` are never called);
+* ``meta.json`` -- ``{"format": FORMAT_VERSION, "sha256": <hex digest of weights.safetensors>, "tensors": [<sorted
+  names>], "meta": <the caller's JSON dict>}``.
+
+Saving is atomic for a single writer. The new checkpoint is built in a hidden sibling ``.NAME.tmp-XXXX/`` (same parent,
+so the renames below stay on one file system), each file and the directory are fsynced, then
+
+1. an existing ``NAME/`` is renamed to ``.NAME.old-XXXX/``,
+2. ``.NAME.tmp-XXXX/`` is renamed to ``NAME/`` and the parent directory is fsynced,
+3. ``.NAME.old-XXXX/`` is deleted.
+
+A process killed at any moment therefore leaves a complete ``NAME/`` (old or new), or -- killed between steps 1 and 2 --
+no ``NAME/`` but a complete ``.NAME.old-XXXX/``. Readers handle that state without writing anything:
+:func:`resolve_checkpoint` points them at the ``.old`` copy. The next :func:`save_checkpoint` repairs it (renames the
+``.old`` copy back) and deletes leftover ``.tmp``/``.old`` siblings before it writes. Readers never modify the
+file system, so an evaluator may load while a trainer saves; both files are opened through one directory handle, so a
+reader never pairs the weights of one checkpoint with the metadata of another.
+
+Random-number generators are stored through :func:`pack_generators` / :func:`unpack_generators` (numpy bit-generator
+states in JSON, torch generator states as uint8 tensors), and modules through :func:`module_tensors` /
+:func:`load_module`::
+
+    tensors = {**module_tensors("policy", policy), **rng_tensors}
+    save_checkpoint(run_dir / "checkpoint", tensors, {"iteration": i, **rng_meta})
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import secrets
+import shutil
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import safetensors.torch
+import torch
+from safetensors import SafetensorError
+
+FORMAT_VERSION = 1
+WEIGHTS_FILE = "weights.safetensors"
+META_FILE = "meta.json"
+_RNG_KEY = "rng"
+_TORCH_RNG_PREFIX = "rng.torch."
+
+
+class CheckpointError(ValueError):
+    """A checkpoint is missing, incomplete, modified, or does not match what the caller expects."""
+
+
+# --- saving ---------------------------------------------------------------------------------------------------------
+
+
+def save_checkpoint(directory: Path, tensors: Mapping[str, torch.Tensor], meta: Mapping[str, Any]) -> Path:
+    """Atomically write ``tensors`` and the JSON-serialisable ``meta`` to the checkpoint ``directory``; returns it.
+
+    ``directory`` is replaced as a whole (see the module docstring for the protocol). An existing ``directory``
+    must be a checkpoint (only ``weights.safetensors`` and ``meta.json``) or empty, so a mistyped path never deletes
+    someone's files. Tensors are detached, copied to contiguous CPU memory (tied weights become separate copies).
+    Raises ``TypeError`` for a non-tensor value, ``ValueError`` for meta that is not strict JSON, both before
+    anything is written.
+    """
+    directory = Path(directory)
+    weights_bytes = _serialise_tensors(tensors)
+    meta_bytes = _serialise_meta(weights_bytes, sorted(tensors), meta)
+
+    parent = directory.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    _recover(directory)
+    _check_replaceable(directory)
+
+    tmp = Path(tempfile.mkdtemp(prefix=f".{directory.name}.tmp-", dir=parent))
+    old: Path | None = None
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp creates 0700; give the directory the usual permissions
+        _write_synced(tmp / WEIGHTS_FILE, weights_bytes)
+        _write_synced(tmp / META_FILE, meta_bytes)
+        _fsync_directory(tmp)
+        if directory.exists():
+            old = parent / f".{directory.name}.old-{secrets.token_hex(4)}"
+            os.replace(directory, old)
+        os.replace(tmp, directory)
+        _fsync_directory(parent)
+    except BaseException:
+        if old is not None and not directory.exists():
+            os.replace(old, directory)
+            old = None
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return directory
+
+
+def _serialise_tensors(tensors: Mapping[str, torch.Tensor]) -> bytes:
+    prepared: dict[str, torch.Tensor] = {}
+    for name, tensor in tensors.items():
+        if not isinstance(name, str):
+            raise TypeError(f"tensor names must be str, got {name!r}")
+        if not isinstance(tensor, torch.Tensor):
+            raise TypeError(f"{name!r} is a {type(tensor).__name__}, not a torch.Tensor")
+        # clone: safetensors refuses tensors that share storage (tied weights, views of one buffer)
+        prepared[name] = tensor.detach().to("cpu").contiguous().clone()
+    return safetensors.torch.save(prepared)
+
+
+def _serialise_meta(weights_bytes: bytes, names: list[str], meta: Mapping[str, Any]) -> bytes:
+    document = {"format": FORMAT_VERSION, "sha256": hashlib.sha256(weights_bytes).hexdigest(), "tensors": names}
+    document["meta"] = dict(meta)
+    try:
+        # allow_nan=False: NaN/Infinity are not JSON and other readers reject them
+        text = json.dumps(document, indent=2, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"checkpoint meta is not strict JSON: {error}") from error
+    return (text + "\n").encode("utf-8")
+
+
+def _write_synced(path: Path, data: bytes) -> None:
+    with open(path, "wb") as file:
+        file.write(data)
+        file.flush()
+        os.fsync(file.fileno())
+
+
+def _fsync_directory(path: Path) -> None:
+    """Make a directory's entries (new files, renames) durable; a no-op where directories cannot be opened."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:  # Windows cannot open directories
+        return
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _siblings(directory: Path, kind: str) -> list[Path]:
+    return sorted(directory.parent.glob(f".{directory.name}.{kind}-*"))
+
+
+def _recover(directory: Path) -> None:
+    """Writer-side repair: restore an ``.old`` copy left by a kill between the renames, then drop leftovers."""
+    if not directory.exists():
+        with contextlib.suppress(CheckpointError):
+            os.replace(resolve_checkpoint(directory), directory)
+            _fsync_directory(directory.parent)
+    for leftover in _siblings(directory, "tmp") + _siblings(directory, "old"):
+        shutil.rmtree(leftover, ignore_errors=True)
+
+
+def _check_replaceable(directory: Path) -> None:
+    if not directory.exists():
+        return
+    if not directory.is_dir():
+        raise CheckpointError(f"{directory}: exists and is not a directory; refusing to replace it")
+    foreign = sorted(p.name for p in directory.iterdir() if p.name not in (WEIGHTS_FILE, META_FILE))
+    if foreign:
+        raise CheckpointError(f"{directory}: not a checkpoint (contains {', '.join(foreign)}); refusing to replace it")
+
+
+# --- loading --------------------------------------------------------------------------------------------------------
+
+
+def resolve_checkpoint(directory: Path) -> Path:
+    """The directory to read the checkpoint ``directory`` from, without modifying anything.
+
+    That is ``directory`` itself, or -- if a save was killed between its two renames -- the complete
+    ``.NAME.old-XXXX`` sibling holding the previous checkpoint. Raises :class:`CheckpointError` if neither exists.
+    """
+    directory = Path(directory)
+    if directory.is_dir():
+        return directory
+    complete = [p for p in _siblings(directory, "old") if (p / META_FILE).is_file() and (p / WEIGHTS_FILE).is_file()]
+    if not complete:
+        raise CheckpointError(f"{directory}: no checkpoint (directory missing)")
+    return max(complete, key=lambda p: p.stat().st_mtime_ns)
+
+
+def load_checkpoint(directory: Path) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    """Read and verify a checkpoint written by :func:`save_checkpoint`; returns ``(tensors, meta)``.
+
+    Verifies the format version, the sha256 of ``weights.safetensors`` and the tensor names. Any problem -- a
+    missing file, a truncated or modified file, invalid JSON, an unknown format -- raises :class:`CheckpointError`
+    with a one-line message naming the file. The weights are parsed by safetensors only (no pickle, no
+    ``torch.load``); the bytes parsed are exactly the bytes hashed.
+    """
+    source = resolve_checkpoint(directory)
+    meta_path, weights_path = source / META_FILE, source / WEIGHTS_FILE
+    try:
+        dir_fd = os.open(source, os.O_RDONLY)
+    except OSError as error:
+        raise CheckpointError(f"{source}: cannot open ({error.strerror})") from error
+    try:
+        meta_bytes = _read_at(dir_fd, META_FILE, meta_path)
+        weights_bytes = _read_at(dir_fd, WEIGHTS_FILE, weights_path)
+    finally:
+        os.close(dir_fd)
+
+    document = _parse_meta(meta_bytes, meta_path)
+    digest = hashlib.sha256(weights_bytes).hexdigest()
+    if digest != document["sha256"]:
+        raise CheckpointError(
+            f"{weights_path}: sha256 {digest[:12]}... does not match {document['sha256'][:12]}... in {META_FILE}"
+            " (file truncated or modified)"
+        )
+    try:
+        tensors = safetensors.torch.load(weights_bytes)
+    except (SafetensorError, ValueError, RuntimeError) as error:
+        raise CheckpointError(f"{weights_path}: not a valid safetensors file ({error})") from error
+    if sorted(tensors) != document["tensors"]:
+        missing = sorted(set(document["tensors"]) - set(tensors))
+        unexpected = sorted(set(tensors) - set(document["tensors"]))
+        raise CheckpointError(
+            f"{weights_path}: tensor names differ from {META_FILE} (missing {missing}, unexpected {unexpected})"
+        )
+    return tensors, document["meta"]
+
+
+def _read_at(dir_fd: int, name: str, path: Path) -> bytes:
+    try:
+        fd = os.open(name, os.O_RDONLY, dir_fd=dir_fd)
+    except FileNotFoundError as error:
+        raise CheckpointError(f"{path}: missing") from error
+    except OSError as error:
+        raise CheckpointError(f"{path}: cannot open ({error.strerror})") from error
+    with os.fdopen(fd, "rb") as file:
+        return file.read()
+
+
+def _parse_meta(meta_bytes: bytes, path: Path) -> dict[str, Any]:
+    try:
+        document = json.loads(meta_bytes.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise CheckpointError(f"{path}: invalid JSON ({error})") from error
+    if not isinstance(document, dict):
+        raise CheckpointError(f"{path}: expected a JSON object, got {type(document).__name__}")
+    if document.get("format") != FORMAT_VERSION:
+        raise CheckpointError(f"{path}: format {document.get('format')!r}, this reader understands {FORMAT_VERSION}")
+    sha, names, meta = document.get("sha256"), document.get("tensors"), document.get("meta")
+    if not isinstance(sha, str) or not isinstance(meta, dict):
+        raise CheckpointError(f"{path}: 'sha256' must be a string and 'meta' an object")
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or names != sorted(names):
+        raise CheckpointError(f"{path}: 'tensors' must be a sorted list of names")
+    return document
+
+
+# --- random-number generators ---------------------------------------------------------------------------------------
+
+
+def pack_generators(
+    numpy_generators: Mapping[str, np.random.Generator],
+    torch_generators: Mapping[str, torch.Generator],
+) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    """Capture generator states as ``(tensors, meta)`` to merge into a checkpoint's tensors and meta.
+
+    numpy states go to ``meta["rng"]["numpy"][name]`` (JSON; arrays inside a state become lists), torch states
+    to the uint8 tensors ``"rng.torch.<name>"`` (pass ``torch.default_generator`` to include the global one).
+    """
+    numpy_states = {name: _to_json(gen.bit_generator.state) for name, gen in numpy_generators.items()}
+    tensors = {f"{_TORCH_RNG_PREFIX}{name}": gen.get_state().clone() for name, gen in torch_generators.items()}
+    return tensors, {_RNG_KEY: {"numpy": numpy_states, "torch": sorted(torch_generators)}}
+
+
+def unpack_generators(
+    tensors: Mapping[str, torch.Tensor],
+    meta: Mapping[str, Any],
+    numpy_generators: Mapping[str, np.random.Generator],
+    torch_generators: Mapping[str, torch.Generator],
+) -> None:
+    """Restore, in place, generators captured by :func:`pack_generators` so they draw the same numbers again.
+
+    The names must match the saved ones exactly, and each numpy generator must use the saved bit generator
+    (e.g. PCG64); otherwise :class:`CheckpointError` is raised before any generator is changed.
+    """
+    rng = meta.get(_RNG_KEY)
+    if not isinstance(rng, Mapping) or not isinstance(rng.get("numpy"), Mapping) or not isinstance(rng.get("torch"), list):
+        raise CheckpointError(f"checkpoint meta has no generator states under {_RNG_KEY!r}")
+    numpy_states: Mapping[str, Any] = rng["numpy"]
+    _check_names("numpy generators", sorted(numpy_states), sorted(numpy_generators))
+    _check_names("torch generators", sorted(rng["torch"]), sorted(torch_generators))
+    for name, gen in numpy_generators.items():
+        saved = numpy_states[name].get("bit_generator") if isinstance(numpy_states[name], Mapping) else None
+        current = gen.bit_generator.state["bit_generator"]
+        if saved != current:
+            raise CheckpointError(f"numpy generator {name!r}: saved bit generator {saved!r}, got {current!r}")
+    for name in torch_generators:
+        state = tensors.get(f"{_TORCH_RNG_PREFIX}{name}")
+        if state is None or state.dtype != torch.uint8:
+            raise CheckpointError(f"torch generator {name!r}: no uint8 state tensor {_TORCH_RNG_PREFIX}{name!r}")
+    for name, gen in numpy_generators.items():
+        gen.bit_generator.state = dict(numpy_states[name])
+    for name, gen in torch_generators.items():
+        gen.set_state(tensors[f"{_TORCH_RNG_PREFIX}{name}"].clone())
+
+
+def _to_json(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, Mapping):
+        return {key: _to_json(item) for key, item in value.items()}
+    return value
+
+
+def _check_names(what: str, saved: list[str], given: list[str]) -> None:
+    if saved != given:
+        missing, unexpected = sorted(set(given) - set(saved)), sorted(set(saved) - set(given))
+        raise CheckpointError(f"{what}: not in checkpoint {missing}, in checkpoint but not given {unexpected}")
+
+
+# --- modules --------------------------------------------------------------------------------------------------------
+
+
+def module_tensors(prefix: str, module: torch.nn.Module) -> dict[str, torch.Tensor]:
+    """``module.state_dict()`` with every key written ``"<prefix>.<key>"`` (parameters and persistent buffers)."""
+    out: dict[str, torch.Tensor] = {}
+    for key, value in module.state_dict().items():
+        if not isinstance(value, torch.Tensor):
+            raise TypeError(f"{prefix}.{key} is a {type(value).__name__}, not a tensor; it cannot go in safetensors")
+        out[f"{prefix}.{key}"] = value
+    return out
+
+
+def load_module(prefix: str, module: torch.nn.Module, tensors: Mapping[str, torch.Tensor]) -> None:
+    """Load the ``"<prefix>."`` entries of ``tensors`` into ``module``, strictly.
+
+    A key the module has but the checkpoint lacks, a ``"<prefix>."`` key the module lacks, or a shape mismatch
+    raises :class:`CheckpointError` naming the key, before the module is changed.
+    """
+    head = f"{prefix}."
+    given = {key[len(head) :]: value for key, value in tensors.items() if key.startswith(head)}
+    expected = module.state_dict()
+    missing = sorted(set(expected) - set(given))
+    if missing:
+        raise CheckpointError(f"{prefix}: missing key {head}{missing[0]}{_more(missing)}")
+    unexpected = sorted(set(given) - set(expected))
+    if unexpected:
+        raise CheckpointError(f"{prefix}: unexpected key {head}{unexpected[0]}{_more(unexpected)}")
+    for key, value in given.items():
+        if value.shape != expected[key].shape:
+            shapes = f"{list(value.shape)} in the checkpoint, {list(expected[key].shape)} in the module"
+            raise CheckpointError(f"{prefix}: {head}{key} has shape {shapes}")
+    module.load_state_dict(given, strict=True)
+
+
+def _more(keys: list[str]) -> str:
+    return f" (and {len(keys) - 1} more)" if len(keys) > 1 else ""

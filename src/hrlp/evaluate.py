@@ -1,0 +1,94 @@
+"""Evaluating a trained policy: returns and success rate with 95% confidence intervals."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from scipy import stats as sstats
+
+from hrlp.rollout import Episode
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A point estimate with a 95% confidence interval."""
+
+    mean: float
+    low: float
+    high: float
+
+    def __str__(self) -> str:
+        return f"{self.mean:.4g} [{self.low:.4g}, {self.high:.4g}]"
+
+
+def mean_interval(xs: list[float], confidence: float = 0.95) -> Interval:
+    """Mean with a Student-t confidence interval (a point interval for a single value)."""
+    a = np.asarray(xs, dtype=float)
+    if a.size == 0:
+        return Interval(math.nan, math.nan, math.nan)
+    m = float(a.mean())
+    if a.size == 1 or a.std() == 0:
+        return Interval(m, m, m)
+    half = float(sstats.t.ppf(0.5 + confidence / 2, a.size - 1) * a.std(ddof=1) / math.sqrt(a.size))
+    return Interval(m, m - half, m + half)
+
+
+def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> Interval:
+    """Success rate with the Wilson score interval (sound near 0 and 1, unlike the normal approximation)."""
+    if n == 0:
+        return Interval(math.nan, math.nan, math.nan)
+    z = float(sstats.norm.ppf(0.5 + confidence / 2))
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return Interval(p, max(0.0, centre - half), min(1.0, centre + half))
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Results over ``episodes`` evaluation episodes."""
+
+    episodes: int
+    ret: Interval
+    success: Interval | None
+    target_dist_sum: Interval | None
+
+
+def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, deterministic: bool = True) -> Evaluation:
+    """Run ``episodes`` episodes of the run's policy (normaliser frozen) and summarise them."""
+    from hrlp.train import TrainConfig, env_factory, load_policy
+
+    if episodes <= 0:
+        raise ValueError(f"episodes must be a positive integer, got {episodes}")
+    policy, normalizer, meta = load_policy(run_dir / "checkpoint")
+    cfg = TrainConfig.from_json(meta["config"])
+    env = env_factory(cfg.task, cfg.episode_steps)()
+    low, high = env.action_space.low, env.action_space.high
+    gen = torch.Generator().manual_seed(seed)
+    done_eps: list[Episode] = []
+    for k in range(episodes):
+        obs, info = env.reset(seed=seed + k)
+        ret, length = 0.0, 0
+        while True:
+            a = policy.act_numpy(normalizer(obs, update=False).astype(np.float32), gen, deterministic)
+            obs, r, term, trunc, info = env.step(np.clip(a, low, high))
+            ret += float(r)
+            length += 1
+            if term or trunc:
+                break
+        s, tds = info.get("success"), info.get("target_dist_sum")
+        done_eps.append(Episode(ret, length, None if s is None else bool(s), None if tds is None else float(tds)))
+    env.close()
+    succ = [e.success for e in done_eps if e.success is not None]
+    tds = [e.target_dist_sum for e in done_eps if e.target_dist_sum is not None]
+    return Evaluation(
+        episodes=episodes,
+        ret=mean_interval([e.ret for e in done_eps]),
+        success=wilson_interval(sum(succ), len(succ)) if succ else None,
+        target_dist_sum=mean_interval(tds) if tds else None,
+    )

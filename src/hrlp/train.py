@@ -1,0 +1,256 @@
+"""The one training loop: collect, advantages, fit the baseline, policy step, log.
+
+Flat policies on any hrlp task or any Gymnasium id with a Box action space go through it.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from hrlp.algos.kernels import gae
+from hrlp.algos.trpo import TRPOConfig, trpo_update
+from hrlp.algos.value import ValueFitConfig, fit_value
+from hrlp.checkpoint import load_checkpoint, load_module, module_tensors, pack_generators, save_checkpoint
+from hrlp.policies.mlp import GaussianPolicy, ValueNet
+from hrlp.policies.normalizer import RunningNormalizer
+from hrlp.rollout import Sampler, mean_or_nan
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Settings of a flat TRPO run (defaults from the paper's Appendix D)."""
+
+    task: str
+    """An hrlp task name (``hrlp tasks``) or a Gymnasium id with a Box action space, e.g. Pusher-v5."""
+    steps: int = 1_000_000
+    """Environment steps in total."""
+    batch_steps: int = 50_000
+    """Environment steps per TRPO iteration (the paper: 50,000 for flat runs)."""
+    num_envs: int = 16
+    """Environments stepped together with batched inference."""
+    seed: int = 0
+    """Seed of the environments, the network initialisation and the action noise."""
+    episode_steps: int | None = None
+    """Episode length for hrlp tasks (None: the task's default, 300)."""
+    hidden: tuple[int, ...] = (64, 64)
+    """Hidden layer widths of the policy and value networks."""
+    trpo: TRPOConfig = field(default_factory=TRPOConfig)
+    """TRPO settings (max KL 0.01, gamma 0.99, ...)."""
+    value: ValueFitConfig = field(default_factory=ValueFitConfig)
+    """Value-baseline fit settings."""
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "batch_steps", "num_envs"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if self.batch_steps < self.num_envs:
+            raise ValueError(f"batch_steps ({self.batch_steps}) must be at least num_envs ({self.num_envs})")
+        if self.episode_steps is not None and (not isinstance(self.episode_steps, int) or self.episode_steps <= 0):
+            raise ValueError(f"episode_steps must be a positive integer, got {self.episode_steps!r}")
+        if not self.hidden or any(h <= 0 for h in self.hidden):
+            raise ValueError(f"hidden must be positive layer widths, got {self.hidden!r}")
+
+    @property
+    def steps_per_env(self) -> int:
+        """Steps each environment takes per iteration."""
+        return math.ceil(self.batch_steps / self.num_envs)
+
+    @property
+    def iterations(self) -> int:
+        """TRPO iterations needed to cover ``steps``."""
+        return math.ceil(self.steps / (self.steps_per_env * self.num_envs))
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-serialisable dict of every setting."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> TrainConfig:
+        """Inverse of :meth:`to_json`."""
+        d = dict(d)
+        d["hidden"] = tuple(d["hidden"])
+        d["trpo"] = TRPOConfig(**d["trpo"])
+        d["value"] = ValueFitConfig(**d["value"])
+        return cls(**d)
+
+
+def env_factory(task: str, episode_steps: int | None = None, **kwargs: Any) -> Callable[[], gym.Env]:
+    """A constructor for ``task``: an hrlp task name/id or a Gymnasium id. Raises ValueError for an unknown task."""
+    from hrlp.envs import TASKS, make
+
+    name = task.removeprefix("hrlp/").removesuffix("-v0")
+    if name in TASKS:
+        kw = dict(kwargs)
+        if episode_steps is not None:
+            kw["episode_steps"] = episode_steps
+        make(name, **kw)  # validate arguments now, before any compute
+        return lambda: make(name, **kw)
+    if task not in gym.registry:
+        raise ValueError(f"unknown task {task!r}: not an hrlp task (see 'hrlp tasks') nor a registered Gymnasium id")
+    probe = gym.make(task, **kwargs)
+    space = probe.action_space
+    probe.close()
+    if not isinstance(space, gym.spaces.Box):
+        raise ValueError(f"{task}: flat training needs a Box action space, got {space}")
+    return lambda: gym.make(task, **kwargs)
+
+
+class Trainer:
+    """Flat TRPO on one task: owns the policy, the baseline, the normaliser and the sampler."""
+
+    def __init__(self, cfg: TrainConfig) -> None:
+        self.cfg = cfg
+        factory = env_factory(cfg.task, cfg.episode_steps)
+        torch.manual_seed(cfg.seed)
+        probe = factory()
+        obs_dim = int(np.prod(probe.observation_space.shape))
+        act_dim = int(np.prod(probe.action_space.shape))
+        probe.close()
+        self.policy = GaussianPolicy(obs_dim, act_dim, cfg.hidden)
+        self.value_net = ValueNet(obs_dim, cfg.hidden)
+        self.normalizer = RunningNormalizer(obs_dim)
+        self.sampler = Sampler([factory] * cfg.num_envs, self.policy, self.normalizer, seed=cfg.seed)
+        self.iteration = 0
+        self.env_steps = 0
+
+    def iterate(self) -> dict[str, float]:
+        """One iteration: collect, GAE, fit the baseline, TRPO step. Returns its statistics."""
+        cfg = self.cfg
+        t0 = time.perf_counter()
+        timing = self.sampler.timing
+        env0, inf0 = timing.env, timing.inference
+        batch, episodes = self.sampler.collect(cfg.steps_per_env)
+        t1 = time.perf_counter()
+        T, N, D = batch.obs.shape
+        obs = batch.obs.reshape(T * N, D)
+        with torch.no_grad():
+            values = self.value_net(obs).reshape(T, N)
+            next_values = self.value_net(batch.next_obs.reshape(T * N, D)).reshape(T, N)
+        adv = gae(batch.rewards, values, next_values, batch.terminated, batch.truncated, cfg.trpo.gamma, cfg.trpo.gae_lambda)
+        actions = batch.actions.reshape(T * N, -1)
+        with torch.no_grad():
+            old_dist = self.policy(obs)
+        stats = trpo_update(
+            list(self.policy.parameters()), lambda: self.policy(obs), old_dist, actions, adv.advantages.reshape(-1), cfg.trpo
+        )
+        vstats = fit_value(self.value_net, obs, adv.returns.reshape(-1), cfg.value)
+        t2 = time.perf_counter()
+        self.iteration += 1
+        self.env_steps += batch.steps
+        wall = t2 - t0
+        out: dict[str, float] = {
+            "iteration": self.iteration,
+            "env_steps": self.env_steps,
+            "episodes": len(episodes),
+            "return_mean": mean_or_nan([e.ret for e in episodes]),
+            "episode_length": mean_or_nan([e.length for e in episodes]),
+            "success_rate": mean_or_nan([e.success for e in episodes]),
+            "target_dist_sum": mean_or_nan([e.target_dist_sum for e in episodes]),
+            **{f"trpo/{k}": float(v) for k, v in stats.to_dict().items()},
+            "value/explained_variance_before": vstats.explained_variance_before,
+            "value/explained_variance_after": vstats.explained_variance_after,
+            "time/env_share": (timing.env - env0) / wall,
+            "time/inference_share": (timing.inference - inf0) / wall,
+            "time/update_share": (t2 - t1) / wall,
+            "time/steps_per_s": batch.steps / wall,
+        }
+        return out
+
+    # --- persistence --------------------------------------------------------------------------
+    def state(self) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+        """Tensors and JSON metadata of the whole training state."""
+        tensors = {**module_tensors("policy", self.policy), **module_tensors("value", self.value_net)}
+        tensors.update({f"normalizer.{k}": v for k, v in self.normalizer.state_dict().items()})
+        rng_tensors, rng_meta = pack_generators({}, {"actions": self.sampler.generator})
+        tensors.update(rng_tensors)
+        meta = {
+            **rng_meta,
+            "kind": "flat",
+            "config": self.cfg.to_json(),
+            "iteration": self.iteration,
+            "env_steps": self.env_steps,
+            "normalizer": self.normalizer.config(),
+            "obs_dim": self.policy.mean_net[0].in_features,
+            "act_dim": int(self.policy.log_std.numel()),
+        }
+        return tensors, meta
+
+    def save(self, directory: Path) -> Path:
+        """Write the policy, baseline, normaliser and progress atomically to ``directory``."""
+        tensors, meta = self.state()
+        return save_checkpoint(directory, tensors, meta)
+
+
+def load_policy(directory: Path) -> tuple[GaussianPolicy, RunningNormalizer, dict[str, Any]]:
+    """The trained policy and its frozen observation normaliser from a checkpoint directory."""
+    tensors, meta = load_checkpoint(directory)
+    cfg = TrainConfig.from_json(meta["config"])
+    policy = GaussianPolicy(meta["obs_dim"], meta["act_dim"], cfg.hidden)
+    load_module("policy", policy, tensors)
+    normalizer = RunningNormalizer.from_config(
+        meta["normalizer"], {k.removeprefix("normalizer."): v for k, v in tensors.items() if k.startswith("normalizer.")}
+    )
+    normalizer.freeze()
+    return policy, normalizer, meta
+
+
+class RunLogger:
+    """Writes each iteration's statistics to ``progress.csv`` and TensorBoard under the run directory."""
+
+    def __init__(self, run_dir: Path) -> None:
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.run_dir = run_dir
+        self._csv_path = run_dir / "progress.csv"
+        self._fields: list[str] | None = None
+        self._tb = SummaryWriter(str(run_dir / "tb"))
+
+    def log(self, stats: dict[str, float]) -> None:
+        """Append one row (the header comes from the first row)."""
+        if self._fields is None:
+            self._fields = list(stats)
+            new = not self._csv_path.exists()
+            with self._csv_path.open("a", newline="") as f:
+                if new:
+                    csv.writer(f).writerow(self._fields)
+        with self._csv_path.open("a", newline="") as f:
+            csv.writer(f).writerow([stats.get(k, math.nan) for k in self._fields])
+        step = int(stats["env_steps"])
+        for k, v in stats.items():
+            if isinstance(v, int | float) and math.isfinite(v):
+                self._tb.add_scalar(k, v, step)
+        self._tb.flush()
+
+    def close(self) -> None:
+        """Flush and close TensorBoard."""
+        self._tb.close()
+
+
+def train(cfg: TrainConfig, run_dir: Path) -> Iterator[dict[str, float]]:
+    """Train, yielding each iteration's statistics; writes logs, a checkpoint per iteration, and ``config.json``."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    trainer = Trainer(cfg)
+    (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2))
+    logger = RunLogger(run_dir)
+    try:
+        for _ in range(cfg.iterations):
+            stats = trainer.iterate()
+            logger.log(stats)
+            trainer.save(run_dir / "checkpoint")
+            yield stats
+    finally:
+        logger.close()
+        trainer.sampler.close()

@@ -1,0 +1,134 @@
+"""The flat training loop end to end at tiny budgets: logs, checkpoints, evaluation, determinism, bad input."""
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from hrlp.checkpoint import load_checkpoint
+from hrlp.cli import app
+from hrlp.evaluate import evaluate_run, mean_interval, wilson_interval
+from hrlp.rollout import Sampler
+from hrlp.train import TrainConfig, Trainer, env_factory, load_policy, train
+
+TINY = {"steps": 400, "batch_steps": 200, "num_envs": 4, "episode_steps": 30}
+
+
+def test_training_writes_logs_and_a_checkpoint_that_evaluates(tmp_path):
+    cfg = TrainConfig(task="Gripper", **TINY)
+    rows = list(train(cfg, tmp_path))
+    assert [r["iteration"] for r in rows] == [1, 2] and rows[-1]["env_steps"] == 400
+    for r in rows:
+        assert 0 <= r["trpo/kl"] <= cfg.trpo.max_kl * 1.5
+        assert r["episodes"] > 0 and math.isfinite(r["return_mean"]) and 0 <= r["success_rate"] <= 1
+        shares = r["time/env_share"] + r["time/inference_share"] + r["time/update_share"]
+        assert 0.5 < shares <= 1.0 + 1e-9
+    with (tmp_path / "progress.csv").open() as f:
+        logged = list(csv.DictReader(f))
+    assert len(logged) == 2 and float(logged[1]["env_steps"]) == 400
+    assert any((tmp_path / "tb").iterdir())
+    assert TrainConfig.from_json(json.loads((tmp_path / "config.json").read_text())) == cfg
+    tensors, meta = load_checkpoint(tmp_path / "checkpoint")
+    assert meta["iteration"] == 2 and "policy.log_std" in tensors
+    ev = evaluate_run(tmp_path, episodes=3)
+    assert ev.episodes == 3 and math.isfinite(ev.ret.mean) and ev.success is not None
+
+
+def test_saved_policy_acts_like_the_trained_one(tmp_path):
+    trainer = Trainer(TrainConfig(task="Reacher", **TINY))
+    trainer.iterate()
+    trainer.save(tmp_path / "checkpoint")
+    policy, normalizer, _ = load_policy(tmp_path / "checkpoint")
+    obs = np.random.default_rng(0).normal(size=(5, 27))
+    a = trainer.policy.act_numpy(trainer.normalizer.normalize(obs).astype(np.float32), deterministic=True)
+    b = policy.act_numpy(normalizer(obs, update=False).astype(np.float32), deterministic=True)
+    np.testing.assert_allclose(a, b, rtol=1e-6)
+    assert normalizer.frozen
+
+
+def test_same_seed_gives_the_same_first_iterations():
+    def first_two(seed):
+        trainer = Trainer(TrainConfig(task="ReachAndGrip1", seed=seed, **TINY))
+        return [{k: v for k, v in trainer.iterate().items() if not k.startswith("time/")} for _ in range(2)]
+
+    a, b, c = first_two(3), first_two(3), first_two(4)
+    assert a == b
+    assert a != c
+
+
+def test_truncated_steps_bootstrap_from_the_real_final_observation():
+    factory = env_factory("Reacher", episode_steps=5)
+    cfg = TrainConfig(task="Reacher", num_envs=2, batch_steps=2, steps=2)
+    trainer = Trainer(cfg)
+    sampler = Sampler([factory, factory], trainer.policy, trainer.normalizer, seed=0)
+    batch, episodes = sampler.collect(7)
+    assert batch.truncated[4].all() and not batch.truncated[3].any() and not batch.terminated.any()
+    assert len(episodes) == 2 and all(e.length == 5 for e in episodes)
+    # After a reset the next step's input is the new episode's first observation, not the final one.
+    assert not torch.equal(batch.next_obs[4], batch.obs[5])
+    assert torch.equal(batch.next_obs[3], batch.obs[4])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"task": "Reacher", "steps": 0}, "steps must be a positive integer"),
+        ({"task": "Reacher", "batch_steps": 2, "num_envs": 4}, "at least num_envs"),
+        ({"task": "Reacher", "hidden": (64, 0)}, "hidden"),
+    ],
+)
+def test_bad_configs_fail_with_one_line_errors(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        TrainConfig(**kwargs)
+
+
+def test_cli_rejects_bad_input_before_any_compute(tmp_path):
+    runner = CliRunner()
+    for args, message in (
+        (["train", "NoSuchTask"], "unknown task"),
+        (["train", "Reacher", "--max-kl", "-0.1"], "max_kl"),
+        (["train", "Reacher", "--batch-steps", "0"], "batch_steps"),
+        (["train", "CartPole-v1"], "Box action space"),
+        (["eval", str(tmp_path / "missing")], "no checkpoint"),
+    ):
+        result = runner.invoke(app, [*args, "--run-dir", str(tmp_path / "r")] if args[0] == "train" else args)
+        assert result.exit_code == 2, (args, result.output)
+        assert message in result.output
+    assert not (tmp_path / "r").exists()
+
+
+def test_cli_train_eval_render_on_a_gymnasium_task_and_an_hrlp_task(tmp_path):
+    runner = CliRunner()
+    run = tmp_path / "run"
+    r = runner.invoke(app, ["train", "Gripper", "--steps", "200", "--batch-steps", "200", "--num-envs", "4",
+                            "--episode-steps", "25", "--run-dir", str(run)])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["eval", str(run), "--episodes", "2"])
+    assert r.exit_code == 0 and "success rate" in r.output
+    r = runner.invoke(app, ["render", str(run), "--out", str(tmp_path / "v.mp4"), "--steps", "5", "--width", "32",
+                            "--height", "32"])  # fmt: skip
+    assert r.exit_code == 0 and (tmp_path / "v.mp4").stat().st_size > 0
+    r = runner.invoke(app, ["train", "Pendulum-v1", "--steps", "200", "--batch-steps", "200", "--num-envs", "2",
+                            "--run-dir", str(tmp_path / "pend")])  # fmt: skip
+    assert r.exit_code == 0, r.output
+
+
+def test_confidence_intervals():
+    iv = wilson_interval(0, 10)
+    assert iv.mean == 0 and iv.low == 0 and 0.25 < iv.high < 0.35  # Wilson: 0/10 -> [0, 0.278]
+    iv = wilson_interval(5, 10)
+    assert iv.low == pytest.approx(0.2366, abs=1e-3) and iv.high == pytest.approx(0.7634, abs=1e-3)
+    m = mean_interval([1.0, 2.0, 3.0])
+    assert m.mean == 2.0 and m.low == pytest.approx(2 - 4.303 / math.sqrt(3), abs=1e-3)
+
+
+@pytest.mark.slow
+def test_flat_trpo_learns_pendulum(tmp_path):
+    cfg = TrainConfig(task="Pendulum-v1", steps=300_000, batch_steps=10_000, num_envs=10, seed=0)
+    rows = list(train(cfg, tmp_path))
+    first, last = rows[0]["return_mean"], max(r["return_mean"] for r in rows[-5:])
+    assert last > first + 400, (first, last)  # random policy ~ -1200; learning reaches ~ -200 to -600
