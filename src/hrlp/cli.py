@@ -17,7 +17,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 console = Console()
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, soft_wrap=True)  # one-line errors, never wrapped
 
 
 def _fail(message: str) -> typer.Exit:
@@ -113,7 +113,7 @@ def theory(
 @app.command()
 def train(
     task: Annotated[str, typer.Argument(help="hrlp task (see 'hrlp tasks') or a Gymnasium id with a Box action space.")],
-    steps: Annotated[int, typer.Option(help="Environment steps in total.")] = 1_000_000,
+    steps: Annotated[int | None, typer.Option(help="Environment steps in total (default 1,000,000).")] = None,
     seed: Annotated[int, typer.Option(help="Seed of environments, network and action noise.")] = 0,
     run_dir: Annotated[Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).")] = None,
     batch_steps: Annotated[int, typer.Option(help="Environment steps per TRPO iteration (paper: 50,000).")] = 50_000,
@@ -121,6 +121,10 @@ def train(
     max_kl: Annotated[float, typer.Option(help="TRPO's trust region, the maximal mean KL per step.")] = 0.01,
     gamma: Annotated[float, typer.Option(help="Discount factor.")] = 0.99,
     episode_steps: Annotated[int | None, typer.Option(help="Episode length of hrlp tasks (default 300).")] = None,
+    resume: Annotated[
+        bool,
+        typer.Option(help="Continue the run in --run-dir from its last checkpoint, with its own settings (--steps may grow)."),
+    ] = False,
 ) -> None:
     """Train a flat TRPO policy; logs to progress.csv and TensorBoard, checkpoints after every iteration."""
     import dataclasses
@@ -132,19 +136,32 @@ def train(
     from hrlp.train import TrainConfig, env_factory
     from hrlp.train import train as run_training
 
+    out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{seed}"
     try:
-        cfg = TrainConfig(task=task, steps=steps, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
-                          episode_steps=episode_steps,
-                          trpo=dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma))  # fmt: skip
+        if resume:
+            from hrlp.checkpoint import CheckpointError, load_checkpoint
+
+            if not (out / "checkpoint").exists():
+                raise ValueError(f"--resume: {out} has no checkpoint to continue from")
+            try:
+                saved = TrainConfig.from_json(load_checkpoint(out / "checkpoint")[1]["config"])
+            except CheckpointError as e:
+                raise ValueError(str(e)) from None
+            cfg = dataclasses.replace(saved, steps=steps or saved.steps)
+        else:
+            if (out / "checkpoint").exists():
+                raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
+            cfg = TrainConfig(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
+                              episode_steps=episode_steps,
+                              trpo=dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma))  # fmt: skip
         env_factory(cfg.task, cfg.episode_steps)
     except ValueError as e:
         raise _fail(str(e)) from None
-    out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{seed}"
     columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                TextColumn("{task.fields[status]}")]  # fmt: skip
     with Progress(*columns, console=err_console) as progress:
-        bar = progress.add_task(f"train {task}", total=cfg.iterations * cfg.steps_per_env * cfg.num_envs, status="")
-        for st in run_training(cfg, out):
+        bar = progress.add_task(f"train {cfg.task}", total=cfg.iterations * cfg.steps_per_env * cfg.num_envs, status="")
+        for st in run_training(cfg, out, resume=resume):
             status = f"return {st['return_mean']:.1f}"
             if not math.isnan(st["success_rate"]):
                 status += f"  success {st['success_rate']:.2f}"

@@ -152,6 +152,32 @@ class Sampler:
         )
         return batch, episodes
 
+    @property
+    def resumable(self) -> bool:
+        """Whether every environment can save and restore its exact state (hrlp tasks can; most Gymnasium ids not)."""
+        return all(hasattr(env.unwrapped, "get_state") for env in self.envs)
+
+    def get_state(self) -> dict:
+        """The sampler's progress (JSON): current observations, running returns, and each environment's exact state."""
+        return {
+            "obs": self._obs.tolist(),
+            "ret": self._ret.tolist(),
+            "len": self._len.tolist(),
+            "envs": [env.unwrapped.get_state() for env in self.envs] if self.resumable else None,
+        }
+
+    def set_state(self, state: dict) -> None:
+        """Restore :meth:`get_state`. Environments that cannot be restored keep their fresh episodes."""
+        if state["envs"] is None or not self.resumable:
+            return
+        if len(state["envs"]) != self.num_envs:
+            raise ValueError(f"saved sampler has {len(state['envs'])} environments, this one {self.num_envs}")
+        for env, env_state in zip(self.envs, state["envs"], strict=True):
+            env.unwrapped.set_state(env_state)
+        self._obs[:] = state["obs"]
+        self._ret[:] = state["ret"]
+        self._len[:] = state["len"]
+
     def _finish(self, i: int, info: dict) -> Episode:
         success = info.get("success")
         tds = info.get("target_dist_sum")

@@ -22,7 +22,7 @@ import torch
 from hrlp.algos.kernels import gae
 from hrlp.algos.trpo import TRPOConfig, trpo_update
 from hrlp.algos.value import ValueFitConfig, fit_value
-from hrlp.checkpoint import load_checkpoint, load_module, module_tensors, pack_generators, save_checkpoint
+from hrlp.checkpoint import load_checkpoint, load_module, module_tensors, pack_generators, save_checkpoint, unpack_generators
 from hrlp.policies.mlp import GaussianPolicy, ValueNet
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import Sampler, mean_or_nan
@@ -178,6 +178,7 @@ class Trainer:
         tensors.update(rng_tensors)
         meta = {
             **rng_meta,
+            "sampler": self.sampler.get_state(),
             "kind": "flat",
             "config": self.cfg.to_json(),
             "iteration": self.iteration,
@@ -187,6 +188,24 @@ class Trainer:
             "act_dim": int(self.policy.log_std.numel()),
         }
         return tensors, meta
+
+    @classmethod
+    def resume(cls, directory: Path) -> Trainer:
+        """A trainer restored from a checkpoint written by :meth:`save`: it continues exactly where that run was.
+
+        On CPU, with hrlp tasks (whose environments save their exact state), the resumed run produces the same
+        numbers as an uninterrupted one. Other Gymnasium environments restart their episodes.
+        """
+        tensors, meta = load_checkpoint(directory)
+        trainer = cls(TrainConfig.from_json(meta["config"]))
+        load_module("policy", trainer.policy, tensors)
+        load_module("value", trainer.value_net, tensors)
+        trainer.normalizer.load_state_dict({k.removeprefix("normalizer."): v for k, v in tensors.items()
+                                            if k.startswith("normalizer.")})  # fmt: skip
+        unpack_generators(tensors, meta, {}, {"actions": trainer.sampler.generator})
+        trainer.sampler.set_state(meta["sampler"])
+        trainer.iteration, trainer.env_steps = int(meta["iteration"]), int(meta["env_steps"])
+        return trainer
 
     def save(self, directory: Path) -> Path:
         """Write the policy, baseline, normaliser and progress atomically to ``directory``."""
@@ -239,18 +258,47 @@ class RunLogger:
         self._tb.close()
 
 
-def train(cfg: TrainConfig, run_dir: Path) -> Iterator[dict[str, float]]:
-    """Train, yielding each iteration's statistics; writes logs, a checkpoint per iteration, and ``config.json``."""
-    run_dir.mkdir(parents=True, exist_ok=True)
-    trainer = Trainer(cfg)
+def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> Iterator[dict[str, float]]:
+    """Train, yielding each iteration's statistics; writes logs, a checkpoint per iteration, and ``config.json``.
+
+    With ``resume``, continue from ``run_dir/checkpoint`` (its config must equal ``cfg`` except ``steps``, which
+    may grow); log rows written after that checkpoint are dropped so the log matches the restored state.
+    """
+    if resume:
+        trainer = Trainer.resume(run_dir / "checkpoint")
+        saved = trainer.cfg
+        if dataclasses.replace(saved, steps=cfg.steps) != cfg:
+            raise ValueError(f"{run_dir}: --resume needs the run's own settings (only --steps may change)")
+        trainer.cfg = cfg
+        _truncate_log(run_dir / "progress.csv", trainer.iteration)
+    else:
+        if (run_dir / "checkpoint").exists():
+            raise ValueError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
+        run_dir.mkdir(parents=True, exist_ok=True)
+        trainer = Trainer(cfg)
     (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2))
     logger = RunLogger(run_dir)
     try:
-        for _ in range(cfg.iterations):
+        while trainer.iteration < cfg.iterations:
             stats = trainer.iterate()
-            logger.log(stats)
             trainer.save(run_dir / "checkpoint")
+            logger.log(stats)
             yield stats
     finally:
         logger.close()
         trainer.sampler.close()
+
+
+def _truncate_log(path: Path, iteration: int) -> None:
+    """Keep the header and the rows up to ``iteration`` (a kill between checkpoint and log leaves at most one gap)."""
+    if not path.exists():
+        return
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        return
+    kept = [rows[0]] + [r for r in rows[1:] if r and int(float(r[0])) <= iteration]
+    tmp = path.with_suffix(".csv.tmp")
+    with tmp.open("w", newline="") as f:
+        csv.writer(f).writerows(kept)
+    tmp.replace(path)

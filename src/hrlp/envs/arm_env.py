@@ -34,6 +34,16 @@ from hrlp.envs.tasks import Task
 log = logging.getLogger(__name__)
 
 
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
 class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
     """One of the paper's tasks on the arm with a claw.
 
@@ -132,6 +142,50 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
     def close(self) -> None:
         """Release the renderer."""
         self.physics.close()
+
+    # --- exact save and restore (for resuming training mid-episode) ----------------------------
+    def get_state(self) -> dict[str, Any]:
+        """Everything needed to continue this environment exactly: physics, episode progress, task state, RNG.
+
+        Arrays are returned as lists so the result is JSON-serialisable.
+        """
+        import mujoco
+
+        p = self.physics
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        phys = np.empty(mujoco.mj_stateSize(p.model, spec))
+        mujoco.mj_getState(p.model, p.data, phys, spec)
+        return {
+            "physics": phys.tolist(),
+            "obs": self._obs.tolist(),
+            "t": self._t,
+            "episodes": self._episodes,
+            "success": self._success,
+            "sums": list(self._sums),
+            "needs_reset": self._needs_reset,
+            "rng": _jsonable(self._rng.bit_generator.state),
+            "task": {k: np.asarray(v).tolist() for k, v in self.task.episode_state().items()},
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a state from :meth:`get_state`."""
+        import mujoco
+
+        p = self.physics
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        phys = np.asarray(state["physics"], dtype=np.float64)
+        if phys.shape != (mujoco.mj_stateSize(p.model, spec),):
+            raise ValueError(f"{self.task.name}: saved physics state has {phys.size} numbers, this model needs "
+                             f"{mujoco.mj_stateSize(p.model, spec)}")  # fmt: skip
+        mujoco.mj_setState(p.model, p.data, phys, spec)
+        mujoco.mj_forward(p.model, p.data)
+        self._obs[:] = state["obs"]
+        self._t, self._episodes = int(state["t"]), int(state["episodes"])
+        self._success, self._needs_reset = bool(state["success"]), bool(state["needs_reset"])
+        self._sums = [float(v) for v in state["sums"]]
+        self._rng = np.random.default_rng()
+        self._rng.bit_generator.state = state["rng"]
+        self.task.set_episode_state({k: np.asarray(v) for k, v in state["task"].items()})
 
     # --- internals ----------------------------------------------------------------------------
     def _observe(self) -> np.ndarray:

@@ -90,6 +90,14 @@ class Task(abc.ABC):
         """Per-step values of :attr:`tracked`."""
         return ()
 
+    def episode_state(self) -> dict[str, np.ndarray]:
+        """The task's own per-episode state (e.g. the Reacher's goal), for exact save and restore."""
+        return {}
+
+    def set_episode_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`episode_state`."""
+        return None
+
 
 # --- start-state helpers ----------------------------------------------------------------------
 
@@ -250,6 +258,12 @@ class ReacherTask(Task):
 
     def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
         out[:] = self.goal
+
+    def episode_state(self) -> dict[str, np.ndarray]:
+        return {"goal": self.goal.copy()}
+
+    def set_episode_state(self, state: dict[str, np.ndarray]) -> None:
+        self.goal[:] = state["goal"]
 
 
 # --- Gripper and reach-and-grip -----------------------------------------------------------------
