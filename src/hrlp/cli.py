@@ -193,6 +193,61 @@ def eval_(
         console.print(f"TargetDistSum (mean, 95% CI): {ev.target_dist_sum}")
 
 
+skills_app = typer.Typer(help="The skill library: frozen, parameterised skills for the Manager.", no_args_is_help=True)
+app.add_typer(skills_app, name="skills")
+_LIBRARY = Annotated[
+    Path | None, typer.Option("--library", help="Library directory (default $HRLP_SKILLS or ~/.hrlp/skills).")
+]
+
+
+@skills_app.command("list")
+def skills_list(library: _LIBRARY = None) -> None:
+    """List the skills in the library."""
+    from hrlp.skills import SkillLibrary
+
+    lib = SkillLibrary(library)
+    table = Table(title=f"skills in {lib.root}")
+    for col in ("name", "task", "params", "k", "trained steps", "sha256"):
+        table.add_column(col)
+    for name in lib.names():
+        m = lib.manifest(name)
+        table.add_row(name, m["task"], str(m["param"]["dim"]), str(m["k"]), f"{m['trained']['env_steps']:,}", m["sha256"][:12])
+    console.print(table)
+
+
+@skills_app.command("show")
+def skills_show(name: Annotated[str, typer.Argument(help="Skill name.")], library: _LIBRARY = None) -> None:
+    """Show a skill's manifest: task, parameters and their meaning, default k, training config, content hash."""
+    import json
+
+    from hrlp.skills import SkillLibrary
+
+    try:
+        m = SkillLibrary(library).manifest(name)
+    except ValueError as e:
+        raise _fail(str(e)) from None
+    console.print_json(json.dumps(m))
+
+
+@skills_app.command("add")
+def skills_add(
+    run_dir: Annotated[Path, typer.Argument(help="A finished run of 'hrlp train' on a skill task.")],
+    name: Annotated[str, typer.Option(help="Name of the new skill.")],
+    k: Annotated[int, typer.Option(help="Default duration in low-level steps (the paper: 8, 10, 15).")] = 15,
+    overwrite: Annotated[bool, typer.Option(help="Replace a skill of the same name.")] = False,
+    library: _LIBRARY = None,
+) -> None:
+    """Turn a finished training run into a named, frozen skill in the library."""
+    from hrlp.checkpoint import CheckpointError
+    from hrlp.skills import SkillLibrary
+
+    try:
+        path = SkillLibrary(library).add(run_dir, name, k=k, overwrite=overwrite)
+    except (ValueError, CheckpointError) as e:
+        raise _fail(str(e)) from None
+    console.print(f"skill {name!r} written to {path}")
+
+
 def main() -> None:
     """Entry point for ``python -m hrlp``."""
     app()

@@ -1,0 +1,231 @@
+"""TRPO training throughput (env steps/s): sb3-contrib, Tianshou and hrlp on Pusher-v5, plus physics alone.
+
+Every library trains TRPO for the same number of environment steps in this one process, one torch thread each.
+Also reported: hrlp's time breakdown (env / inference / update), its fraction of the raw ``mujoco.mj_step``
+ceiling, the same on the arm task ReachAndGrip2, and the peak resident memory of a 50,000-step hrlp batch
+(measured in a subprocess, so the figure is hrlp's alone).
+
+    python benchmarks/trpo_speed.py [--steps 100000] [--batch-steps 25000] [--arm-steps 50000] [--skip tianshou]
+
+Goals: hrlp >= 10x sb3-contrib and >= 3x Tianshou in env steps/s; >= 50% of hrlp's wall time in physics on the
+arm tasks; a 50,000-step batch within 1 GB RSS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import subprocess
+import sys
+import time
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import torch
+
+TASK = "Pusher-v5"
+ARM_TASK = "ReachAndGrip2"
+
+
+def sb3_steps_per_s(steps: int, seed: int) -> float:
+    """sb3-contrib TRPO with its defaults (one env, n_steps 2048)."""
+    from sb3_contrib import TRPO
+
+    model = TRPO("MlpPolicy", TASK, seed=seed, device="cpu")
+    t = time.perf_counter()
+    model.learn(total_timesteps=steps)
+    return model.num_timesteps / (time.perf_counter() - t)
+
+
+def tianshou_steps_per_s(steps: int, seed: int, num_envs: int = 16) -> float:
+    """Tianshou TRPO as in its mujoco_trpo example: 16 DummyVectorEnv envs, 1024 steps per update, full-batch."""
+    from tianshou.algorithm import TRPO
+    from tianshou.algorithm.modelfree.reinforce import ProbabilisticActorPolicy
+    from tianshou.algorithm.optim import AdamOptimizerFactory
+    from tianshou.data import Collector, CollectStats, VectorReplayBuffer
+    from tianshou.env import DummyVectorEnv
+    from tianshou.utils.net.common import Net
+    from tianshou.utils.net.continuous import ContinuousActorProbabilistic, ContinuousCritic
+    from tianshou.utils.torch_utils import policy_within_training_step
+    from torch.distributions import Independent, Normal
+
+    env = gym.make(TASK)
+    envs = DummyVectorEnv([lambda: gym.make(TASK) for _ in range(num_envs)])
+    envs.seed(seed)
+    torch.manual_seed(seed)
+    obs_shape, act_shape = env.observation_space.shape, env.action_space.shape
+    actor = ContinuousActorProbabilistic(
+        preprocess_net=Net(state_shape=obs_shape, hidden_sizes=[64, 64], activation=torch.nn.Tanh),
+        action_shape=act_shape,
+        unbounded=True,
+    )
+    critic = ContinuousCritic(preprocess_net=Net(state_shape=obs_shape, hidden_sizes=[64, 64], activation=torch.nn.Tanh))
+    policy = ProbabilisticActorPolicy(
+        actor=actor,
+        dist_fn=lambda loc_scale: Independent(Normal(*loc_scale), 1),
+        action_scaling=True,
+        action_bound_method="clip",
+        action_space=env.action_space,
+    )
+    algorithm = TRPO(
+        policy=policy,
+        critic=critic,
+        optim=AdamOptimizerFactory(lr=1e-3),
+        gamma=0.99,
+        gae_lambda=0.95,
+        return_scaling=True,
+        advantage_normalization=True,
+        optim_critic_iters=20,
+        max_kl=0.01,
+        backtrack_coeff=0.8,
+        max_backtracks=10,
+    )
+    collect_steps = 1024
+    collector = Collector[CollectStats](algorithm, envs, VectorReplayBuffer(4096, num_envs), exploration_noise=True)
+    collector.reset()
+    done = 0
+    t = time.perf_counter()
+    while done < steps:
+        with policy_within_training_step(algorithm.policy):
+            done += collector.collect(n_step=collect_steps).n_collected_steps
+            algorithm.update(buffer=collector.buffer, batch_size=None, repeat=1)
+        collector.reset_buffer(keep_statistics=True)
+    return done / (time.perf_counter() - t)
+
+
+def hrlp_run(task: str, steps: int, batch_steps: int, seed: int) -> dict[str, float]:
+    """hrlp TRPO (16 envs, batched inference): steps/s over the iterations and step-weighted time shares."""
+    from hrlp.train import TrainConfig, Trainer
+
+    trainer = Trainer(TrainConfig(task=task, steps=steps, batch_steps=batch_steps, num_envs=16, seed=seed))
+    wall = 0.0
+    shares = {"env": 0.0, "inference": 0.0, "update": 0.0}
+    try:
+        while trainer.env_steps < steps:
+            t = time.perf_counter()
+            s = trainer.iterate()
+            dt = time.perf_counter() - t
+            wall += dt
+            for k in shares:
+                shares[k] += s[f"time/{k}_share"] * dt
+    finally:
+        trainer.sampler.close()
+    return {"steps": trainer.env_steps, "wall": wall, "steps_per_s": trainer.env_steps / wall,
+            **{k: v / wall for k, v in shares.items()}}  # fmt: skip
+
+
+def physics_step_seconds(model: mujoco.MjModel, data: mujoco.MjData, nsub: int, n: int, episode: int) -> float:
+    """Seconds per control step of bare ``mj_step`` (``nsub`` substeps) with random controls, reset every ``episode``."""
+    rng = np.random.default_rng(0)
+    lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
+    ctrls = rng.uniform(lo, hi, size=(n, model.nu))
+    mujoco.mj_resetData(model, data)
+    t = time.perf_counter()
+    for i, c in enumerate(ctrls):
+        if i % episode == 0:
+            mujoco.mj_resetData(model, data)
+        data.ctrl[:] = c
+        mujoco.mj_step(model, data, nsub)
+    return (time.perf_counter() - t) / n
+
+
+def pusher_physics(n: int) -> float:
+    env = gym.make(TASK)
+    env.reset(seed=0)
+    u = env.unwrapped
+    return physics_step_seconds(u.model, u.data, u.frame_skip, n, 100)
+
+
+def arm_physics(n: int) -> float:
+    from hrlp.envs import make
+
+    env = make(ARM_TASK)
+    env.reset(seed=0)
+    return physics_step_seconds(env.physics.model, env.physics.data, env.physics.config.substeps, n, 300)
+
+
+def peak_rss_mib(task: str, batch_steps: int, baseline: bool) -> tuple[float, float]:
+    """Peak RSS (MiB) of a fresh interpreter running one hrlp iteration of ``batch_steps`` (or only the imports).
+
+    Returns ``(ru_maxrss, VmHWM)``. Linux carries ``ru_maxrss`` over ``fork``/``exec`` from the parent, so it is
+    at least the parent's RSS at the fork; ``VmHWM`` is the child's own high-water mark.
+    """
+    cmd = [sys.executable, __file__, "--rss-child", task, "--batch-steps", str(batch_steps)]
+    if baseline:
+        cmd.append("--rss-baseline")
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    maxrss, hwm = out.strip().splitlines()[-1].split()
+    return float(maxrss), float(hwm)
+
+
+def rss_child(task: str, batch_steps: int, baseline: bool) -> None:
+    torch.set_num_threads(1)
+    from hrlp.train import TrainConfig, Trainer
+
+    if not baseline:
+        trainer = Trainer(TrainConfig(task=task, steps=batch_steps, batch_steps=batch_steps, num_envs=16, seed=0))
+        trainer.iterate()
+        trainer.sampler.close()
+    hwm = next(line for line in open("/proc/self/status") if line.startswith("VmHWM:"))
+    print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, int(hwm.split()[1]) / 1024)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=100_000, help="env steps per library on Pusher-v5")
+    ap.add_argument("--batch-steps", type=int, default=25_000, help="hrlp env steps per TRPO iteration")
+    ap.add_argument("--arm-steps", type=int, default=50_000, help="hrlp env steps on ReachAndGrip2")
+    ap.add_argument("--physics-steps", type=int, default=20_000, help="control steps of raw mj_step per timing")
+    ap.add_argument("--rss-batch", type=int, default=50_000, help="batch_steps of the memory measurement")
+    ap.add_argument("--rss-task", default=ARM_TASK)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--skip", default="", help="comma-separated: sb3,tianshou,arm,rss")
+    ap.add_argument("--rss-child", help=argparse.SUPPRESS)
+    ap.add_argument("--rss-baseline", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.rss_child:
+        rss_child(args.rss_child, args.batch_steps, args.rss_baseline)
+        return
+    torch.set_num_threads(1)
+    skip = set(filter(None, args.skip.split(",")))
+
+    rates: dict[str, float] = {}
+    hr = hrlp_run(TASK, args.steps, args.batch_steps, args.seed)
+    rates["hrlp"] = hr["steps_per_s"]
+    print(f"hrlp: {hr['steps_per_s']:.0f} steps/s", flush=True)
+    if "sb3" not in skip:
+        rates["sb3-contrib"] = sb3_steps_per_s(args.steps, args.seed)
+        print(f"sb3-contrib: {rates['sb3-contrib']:.0f} steps/s", flush=True)
+    if "tianshou" not in skip:
+        try:
+            rates["tianshou"] = tianshou_steps_per_s(args.steps, args.seed)
+            print(f"tianshou: {rates['tianshou']:.0f} steps/s", flush=True)
+        except ImportError as e:
+            print(f"tianshou skipped: {e}")
+    phys = pusher_physics(args.physics_steps)
+    rates["physics alone"] = 1 / phys
+
+    print(f"\n{TASK}, {args.steps} env steps each, torch threads 1")
+    print(f"{'':<16} {'steps/s':>10} {'hrlp / this':>12}")
+    for name, r in rates.items():
+        print(f"{name:<16} {r:>10.0f} {rates['hrlp'] / r:>11.2f}x")
+    print(f"hrlp time shares: env {hr['env']:.1%}, inference {hr['inference']:.1%}, update {hr['update']:.1%}")
+    print(f"hrlp mj_step share of wall: {hr['steps'] * phys / hr['wall']:.1%}")
+
+    if "arm" not in skip:
+        arm = hrlp_run(ARM_TASK, args.arm_steps, args.batch_steps, args.seed)
+        aphys = arm_physics(args.physics_steps)
+        print(f"\n{ARM_TASK}, hrlp {arm['steps']} env steps: {arm['steps_per_s']:.0f} steps/s, physics alone {1 / aphys:.0f}")
+        print(f"hrlp time shares: env {arm['env']:.1%}, inference {arm['inference']:.1%}, update {arm['update']:.1%}")
+        print(f"hrlp mj_step share of wall: {arm['steps'] * aphys / arm['wall']:.1%} (physics {aphys * 1e6:.0f} us/step)")
+
+    if "rss" not in skip:
+        base = peak_rss_mib(args.rss_task, args.rss_batch, baseline=True)
+        peak = peak_rss_mib(args.rss_task, args.rss_batch, baseline=False)
+        print(f"\npeak RSS (VmHWM), hrlp {args.rss_task} batch_steps={args.rss_batch}: {peak[1]:.0f} MiB "
+              f"(imports alone {base[1]:.0f} MiB); ru_maxrss {peak[0]:.0f} MiB (includes the parent's RSS at fork)")
+
+
+if __name__ == "__main__":
+    main()

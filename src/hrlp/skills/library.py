@@ -1,0 +1,104 @@
+"""The skill library on disk: one checkpoint directory per skill (safetensors + JSON manifest).
+
+A skill file never runs code when loaded (safetensors, JSON; no pickle), and a tampered or
+truncated file fails with a one-line error naming it (the manifest holds the weights' sha256).
+The library lives in ``$HRLP_SKILLS`` or ``~/.hrlp/skills``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+from hrlp.checkpoint import CheckpointError, load_checkpoint, load_module, save_checkpoint
+from hrlp.policies.mlp import GaussianPolicy
+from hrlp.policies.normalizer import RunningNormalizer
+from hrlp.skills.skill import PARAM_SPECS, ParamSpec, Skill
+
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+
+
+def default_library_root() -> Path:
+    """``$HRLP_SKILLS`` if set, else ``~/.hrlp/skills``."""
+    return Path(os.environ.get("HRLP_SKILLS", Path.home() / ".hrlp" / "skills"))
+
+
+def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The trained policy's tensors and the facts about it, from a run directory written by ``hrlp train``."""
+    tensors, meta = load_checkpoint(Path(run_dir) / "checkpoint")
+    task = meta["config"]["task"].removeprefix("hrlp/").removesuffix("-v0")
+    if task not in PARAM_SPECS:
+        raise ValueError(f"{run_dir}: a skill must be trained on one of {', '.join(PARAM_SPECS)}, this run trained {task}")
+    kept = {k: v for k, v in tensors.items() if k.startswith(("policy.", "normalizer."))}
+    return kept, {"task": task, "source": meta}
+
+
+class SkillLibrary:
+    """Named skills in a directory: ``add`` from a finished run, ``load`` frozen, ``list`` and ``manifest``."""
+
+    def __init__(self, root: Path | None = None) -> None:
+        self.root = Path(root) if root is not None else default_library_root()
+
+    def names(self) -> list[str]:
+        """Names of the skills in the library, sorted."""
+        if not self.root.is_dir():
+            return []
+        return sorted(p.name for p in self.root.iterdir() if (p / "meta.json").is_file() and not p.name.startswith("."))
+
+    def add(self, run_dir: Path, name: str, k: int = 15, overwrite: bool = False) -> Path:
+        """Turn a finished training run into the named skill with default duration ``k``; returns its directory."""
+        if not _NAME.match(name):
+            raise ValueError(f"skill name {name!r}: use letters, digits, '_', '-', '.' (at most 64 characters)")
+        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+            raise ValueError(f"skill {name}: default duration k must be a positive integer, got {k!r}")
+        target = self.root / name
+        if target.exists() and not overwrite:
+            raise ValueError(f"skill {name!r} already exists in {self.root}; pass overwrite to replace it")
+        tensors, facts = skill_from_run(run_dir)
+        src = facts["source"]
+        manifest = {
+            "kind": "skill",
+            "name": name,
+            "task": facts["task"],
+            "k": k,
+            "param": PARAM_SPECS[facts["task"]].to_json(),
+            "obs_dim": src["obs_dim"],
+            "act_dim": src["act_dim"],
+            "hidden": src["config"]["hidden"],
+            "normalizer": src["normalizer"],
+            "trained": {"config": src["config"], "iteration": src["iteration"], "env_steps": src["env_steps"]},
+        }
+        return save_checkpoint(target, tensors, manifest)
+
+    def manifest(self, name: str) -> dict[str, Any]:
+        """The skill's manifest (with its content hash under ``sha256``)."""
+        import json
+
+        path = self.root / name / "meta.json"
+        if not path.is_file():
+            raise ValueError(f"no skill {name!r} in {self.root} (known: {', '.join(self.names()) or 'none'})")
+        try:
+            raw = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise CheckpointError(f"{path}: invalid JSON ({e.msg})") from None
+        return {**raw["meta"], "sha256": raw["sha256"]}
+
+    def load(self, name: str) -> Skill:
+        """The named skill, frozen. Raises a one-line error for a missing, tampered or truncated skill."""
+        if name not in self.names():
+            raise ValueError(f"no skill {name!r} in {self.root} (known: {', '.join(self.names()) or 'none'})")
+        tensors, m = load_checkpoint(self.root / name)
+        if m.get("kind") != "skill":
+            raise CheckpointError(f"{self.root / name}: not a skill (kind {m.get('kind')!r})")
+        param = ParamSpec.from_json(m["param"])
+        policy = GaussianPolicy(int(m["obs_dim"]), int(m["act_dim"]), tuple(m["hidden"]))
+        load_module("policy", policy, tensors)
+        norm = RunningNormalizer.from_config(
+            m["normalizer"], {k.removeprefix("normalizer."): v for k, v in tensors.items() if k.startswith("normalizer.")}
+        )
+        return Skill(name, m["task"], param, int(m["k"]), policy, norm, self.manifest(name)["sha256"])
+
+
+__all__ = ["SkillLibrary", "default_library_root", "skill_from_run"]

@@ -1,0 +1,105 @@
+"""A skill: a trained policy frozen for reuse, acting on the arm's base observation and its parameters.
+
+Section 1.1: "the Manager ... selects one of N available macro-actions and passes a vector of
+parameters to the selected macro-action". A skill's parameters enter its observation where its
+training task put them (the Reacher's goal and the Mover's target at indices 24-26, after the
+24 base numbers), so a skill trained on a task can be driven by any Manager that sets them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
+from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
+from hrlp.policies.normalizer import RunningNormalizer
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """What a skill's parameter vector is and where it enters the skill's observation."""
+
+    dim: int
+    """Number of parameters (0 for a parameterless skill such as the Gripper)."""
+    low: tuple[float, ...]
+    """Lower bounds, one per parameter."""
+    high: tuple[float, ...]
+    """Upper bounds, one per parameter."""
+    meaning: str
+    """What the parameters mean, e.g. 'goal position of the hand H (x, y, z), metres'."""
+    obs_start: int = BASE_OBS_DIM
+    """Index of the skill's observation where the parameters start (they follow the 24 base numbers)."""
+
+    def __post_init__(self) -> None:
+        if self.dim < 0 or len(self.low) != self.dim or len(self.high) != self.dim:
+            raise ValueError(f"ParamSpec: dim {self.dim} does not match bounds {self.low}, {self.high}")
+        if any(lo > hi for lo, hi in zip(self.low, self.high, strict=True)):
+            raise ValueError(f"ParamSpec: low {self.low} exceeds high {self.high}")
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-serialisable form."""
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> ParamSpec:
+        """Inverse of :meth:`to_json`."""
+        return cls(int(d["dim"]), tuple(d["low"]), tuple(d["high"]), str(d["meaning"]), int(d["obs_start"]))
+
+
+# The reachable band above the table (docs/environments.md): the Manager's parameter box for 3-d points.
+_WORKSPACE_LOW, _WORKSPACE_HIGH = (-0.55, -0.45, 0.0), (0.25, 0.45, 0.45)
+_POINT = "position of the hand H to reach (x, y, z), metres"
+_TARGET = "target position T of the capsule (x, y, z), metres"
+#: Parameter specifications of the skills trained on each task (the task decides the observation layout).
+PARAM_SPECS: dict[str, ParamSpec] = {
+    "Reacher": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
+    "ReacherStabilised": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
+    "Reacher3D": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
+    "MoverPlain": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _TARGET),
+    "MoverNoised": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _TARGET),
+    "Gripper": ParamSpec(0, (), (), "none: grips the capsule nearest the claw"),
+}
+
+
+class Skill:
+    """A frozen skill: ``act(base_obs [N, 24], params [N, dim]) -> torques [N, 9]`` (the policy's mean action).
+
+    Attributes:
+        name: the skill's name in the library.
+        task: the task it was trained on.
+        param: its parameter specification.
+        k: its default duration in low-level steps.
+        content_hash: sha256 of its weights file (changes if and only if the weights change).
+    """
+
+    def __init__(self, name: str, task: str, param: ParamSpec, k: int, policy: GaussianPolicy,
+                 normalizer: RunningNormalizer, content_hash: str) -> None:  # fmt: skip
+        if k < 1:
+            raise ValueError(f"skill {name}: default duration k must be >= 1, got {k}")
+        self.name, self.task, self.param, self.k, self.content_hash = name, task, param, int(k), content_hash
+        for p in policy.parameters():
+            p.requires_grad_(False)  # frozen: a skill never enters a trust region
+        self.policy = policy.eval()
+        normalizer.freeze()
+        self.normalizer = normalizer
+        self._mean = NumpyMLP(policy.mean_net)
+        self.obs_dim = BASE_OBS_DIM + param.dim
+
+    def observation(self, base_obs: np.ndarray, params: np.ndarray) -> np.ndarray:
+        """The skill's own observation: the 24 base numbers with its parameters after them. [N, 24 + dim]"""
+        base = np.asarray(base_obs, dtype=np.float64)
+        if base.ndim != 2 or base.shape[1] < BASE_OBS_DIM:
+            raise ValueError(f"skill {self.name}: base observations must have shape [N, >=24], got {base.shape}")
+        p = np.asarray(params, dtype=np.float64).reshape(base.shape[0], self.param.dim)
+        return np.concatenate([base[:, :BASE_OBS_DIM], p], axis=1)
+
+    def act(self, base_obs: np.ndarray, params: np.ndarray) -> np.ndarray:
+        """Torques in [-1, 1] for ``N`` states: ``[N, 24] x [N, dim] -> [N, 9]``; rejects NaN/inf inputs."""
+        obs = self.observation(base_obs, params)
+        if not np.isfinite(obs).all():
+            raise ValueError(f"skill {self.name}: observation or parameters contain NaN or inf")
+        a = self._mean(self.normalizer.normalize(obs))
+        return np.clip(a, -1.0, 1.0).reshape(obs.shape[0], N_JOINTS)
