@@ -223,8 +223,10 @@ def main() -> None:
     if "rss" not in skip:
         base = peak_rss_mib(args.rss_task, args.rss_batch, baseline=True)
         peak = peak_rss_mib(args.rss_task, args.rss_batch, baseline=False)
-        print(f"\npeak RSS (VmHWM), hrlp {args.rss_task} batch_steps={args.rss_batch}: {peak[1]:.0f} MiB "
-              f"(imports alone {base[1]:.0f} MiB); ru_maxrss {peak[0]:.0f} MiB (includes the parent's RSS at fork)")
+        print(
+            f"\npeak RSS (VmHWM), hrlp {args.rss_task} batch_steps={args.rss_batch}: {peak[1]:.0f} MiB "
+            f"(imports alone {base[1]:.0f} MiB); ru_maxrss {peak[0]:.0f} MiB (includes the parent's RSS at fork)"
+        )
 
 
 if __name__ == "__main__":
