@@ -81,7 +81,8 @@ def ci95(xs: list[float]) -> tuple[float, float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=200_000, help="training env steps per run")
-    ap.add_argument("--seeds", type=int, default=3, help="seeds 0 .. seeds-1 for each library")
+    ap.add_argument("--seeds", type=int, default=3, help="seeds per library: first-seed .. first-seed + seeds - 1")
+    ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--batch-steps", type=int, default=5_000, help="hrlp env steps per TRPO iteration")
     ap.add_argument("--num-envs", type=int, default=16, help="hrlp environments stepped together")
     ap.add_argument("--episodes", type=int, default=20, help="evaluation episodes per final policy")
@@ -96,7 +97,7 @@ def main() -> None:
     scores: dict[str, list[float]] = {}
     for lib in args.libs.split(","):
         scores[lib] = []
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             score, wall = runners[lib](seed)
             scores[lib].append(score)
             print(f"{lib:<5} seed {seed}: return {score:8.2f}  (training {wall:.0f} s)", flush=True)

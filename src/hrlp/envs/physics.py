@@ -119,6 +119,12 @@ class ArmPhysics:
             g for g in range(m.ngeom) if g not in (self._table, self._object_geom, m.geom("target").id)
         )
         self._renderer: mujoco.Renderer | None = None
+        # Views into MjData (its arrays are never reallocated): reading a measurement costs no indexing.
+        d = self.data
+        self._hand_v = d.site_xpos[self._hand]
+        self._tip_v = (d.site_xpos[self._tips[0]], d.site_xpos[self._tips[1]])
+        self._capsule_v = d.xpos[self._obj_body]
+        self._target_v = d.mocap_pos[self._target_mocap]
         mujoco.mj_forward(m, self.data)
 
     # --- measurements -------------------------------------------------------------------------
@@ -135,22 +141,22 @@ class ArmPhysics:
     @property
     def hand(self) -> np.ndarray:
         """H: where the capsule's centre would be if properly gripped. [3]"""
-        return self.data.site_xpos[self._hand]
+        return self._hand_v
 
     @property
     def fingertips(self) -> tuple[np.ndarray, np.ndarray]:
         """FT1, FT2: the far ends of the two fingers. ([3], [3])"""
-        return self.data.site_xpos[self._tips[0]], self.data.site_xpos[self._tips[1]]
+        return self._tip_v
 
     @property
     def capsule(self) -> np.ndarray:
         """C: the capsule's centre of mass. [3]"""
-        return self.data.xpos[self._obj_body]
+        return self._capsule_v
 
     @property
     def target(self) -> np.ndarray:
         """T: the centre of the shadow capsule, where the capsule should be moved. [3]"""
-        return self.data.mocap_pos[self._target_mocap]
+        return self._target_v
 
     @property
     def forearm_axis(self) -> np.ndarray:
@@ -175,8 +181,8 @@ class ArmPhysics:
         d = self.data
         out[0:9] = d.qpos[0:9]
         out[9:18] = d.qvel[0:9]
-        out[18:21] = d.site_xpos[self._hand]
-        out[21:24] = d.xpos[self._obj_body]
+        out[18:21] = self._hand_v
+        out[21:24] = self._capsule_v
         return out
 
     # --- state setting ------------------------------------------------------------------------

@@ -54,7 +54,7 @@ class SparseSuccess:
 
     def __call__(self, physics: ArmPhysics) -> bool:
         """Whether the current state satisfies both conditions."""
-        return physics.hand_to_capsule() < self.tr1 and physics.finger_gap() < self.tr2
+        return physics.finger_gap() < self.tr2 and physics.hand_to_capsule() < self.tr1
 
 
 class Task(abc.ABC):
