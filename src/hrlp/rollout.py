@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -58,7 +58,6 @@ class Timing:
 
     env: float = 0.0
     inference: float = 0.0
-    extra: dict[str, float] = field(default_factory=dict)
 
 
 class Sampler:
