@@ -31,6 +31,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=15000, help="control steps per task and setting")
     ap.add_argument("--tasks", default="Reacher,MoverNoised,ReachAndMove,Gripper")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the start states and the random torques")
     args = ap.parse_args()
     logging.disable(logging.WARNING)  # the environment logs every instability; we count them instead
     print(f"{'integrator':<13} {'timestep':>8} {'substeps':>8} {'unstable episodes':>18} {'env steps/s':>12}")
@@ -40,8 +41,8 @@ def main() -> None:
         for task in args.tasks.split(","):
             env = make(task, physics=PhysicsConfig(timestep=dt, substeps=nsub))
             env.physics.model.opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{integrator.upper()}")
-            rng = np.random.default_rng(0)
-            env.reset(seed=0)
+            rng = np.random.default_rng(args.seed)
+            env.reset(seed=args.seed)
             for _ in range(args.steps):
                 _, _, terminated, truncated, info = env.step(rng.uniform(-1, 1, 9))
                 steps += 1

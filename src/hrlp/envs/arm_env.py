@@ -21,11 +21,13 @@ terminate early. A physics instability also truncates the episode (``info['physi
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from typing import Any
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS, ArmPhysics, PhysicsConfig
@@ -34,14 +36,10 @@ from hrlp.envs.tasks import Task
 log = logging.getLogger(__name__)
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
+@functools.cache
+def _reward_key(term: str) -> str:
+    # Built once per term name instead of formatting a string per term per step.
+    return f"reward_{term}"
 
 
 class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -123,7 +121,7 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
         if not self._success and self.task.success(p):
             self._success = True
         truncated = self._t >= self.episode_steps
-        info: dict[str, Any] = {f"reward_{k}": v for k, v in terms.items()}
+        info: dict[str, Any] = {_reward_key(k): v for k, v in terms.items()}
         info["success"] = self._success
         if self._sums:
             for i, v in enumerate(self.task.track(p)):
@@ -149,8 +147,6 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
 
         Arrays are returned as lists so the result is JSON-serialisable.
         """
-        import mujoco
-
         p = self.physics
         spec = mujoco.mjtState.mjSTATE_INTEGRATION
         phys = np.empty(mujoco.mj_stateSize(p.model, spec))
@@ -163,14 +159,12 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
             "success": self._success,
             "sums": list(self._sums),
             "needs_reset": self._needs_reset,
-            "rng": _jsonable(self._rng.bit_generator.state),
+            "rng": self._rng.bit_generator.state,  # PCG64: a dict of ints, JSON as it is
             "task": {k: np.asarray(v).tolist() for k, v in self.task.episode_state().items()},
         }
 
     def set_state(self, state: dict[str, Any]) -> None:
         """Restore a state from :meth:`get_state`."""
-        import mujoco
-
         p = self.physics
         spec = mujoco.mjtState.mjSTATE_INTEGRATION
         phys = np.asarray(state["physics"], dtype=np.float64)
