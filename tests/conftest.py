@@ -10,3 +10,7 @@ try:
     torch.set_num_threads(1)
 except ImportError:  # pragma: no cover - torch is a core dependency
     pass
+
+from param_envs import register
+
+register()

@@ -93,7 +93,7 @@ def test_cli_rejects_bad_input_before_any_compute(tmp_path):
         (["train", "NoSuchTask"], "unknown task"),
         (["train", "Reacher", "--max-kl", "-0.1"], "max_kl"),
         (["train", "Reacher", "--batch-steps", "0"], "batch_steps"),
-        (["train", "CartPole-v1"], "Box action space"),
+        (["train", "hrlp_test/MultiDiscreteAction-v0"], "unsupported action space"),
         (["eval", str(tmp_path / "missing")], "no checkpoint"),
     ):
         result = runner.invoke(app, [*args, "--run-dir", str(tmp_path / "r")] if args[0] == "train" else args)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -43,57 +43,51 @@ def tasks() -> None:
 def render(
     source: Annotated[str, typer.Argument(help="A task (random policy), e.g. Gripper, or a run directory (trained policy).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Video file to write (.mp4 or .gif).")] = Path("rollout.mp4"),
-    steps: Annotated[int, typer.Option(help="Control steps to record (default: one episode).")] = 0,
+    steps: Annotated[int, typer.Option(help="Low-level control steps to record (default: one episode).")] = 0,
     seed: Annotated[int, typer.Option(help="Seed of the start state and the actions.")] = 0,
     width: Annotated[int, typer.Option(help="Frame width in pixels.")] = 480,
     height: Annotated[int, typer.Option(help="Frame height in pixels.")] = 360,
     camera: Annotated[str, typer.Option(help="Model camera: front or side.")] = "front",
 ) -> None:
-    """Record a rollout to a video file, off-screen: a task with random actions, or a trained run's policy."""
-    import numpy as np
-    import torch
-    from rich.progress import track
+    """Record a rollout to a video file, off-screen: a task with random actions, or a trained run's policy.
 
-    from hrlp.envs import TASKS, make
-    from hrlp.video import check_video_path, write_video
+    A Manager's video labels every frame with the active skill.
+    """
+    from hrlp.checkpoint import CheckpointError
+    from hrlp.video import check_video_path, rollout_frames, write_video
 
-    rng = np.random.default_rng(seed)
-    act = lambda obs: rng.uniform(-1.0, 1.0, size=9)  # noqa: E731
     try:
-        if Path(source).is_dir():
-            from hrlp.train import TrainConfig, load_policy
-
-            policy, normalizer, meta = load_policy(Path(source) / "checkpoint")
-            cfg = TrainConfig.from_json(meta["config"])
-            source = cfg.task
-            gen = torch.Generator().manual_seed(seed)
-            act = lambda obs: policy.act_numpy(normalizer(obs, update=False).astype(np.float32), gen, True)  # noqa: E731
-        name = source.removeprefix("hrlp/").removesuffix("-v0")
-        if name not in TASKS:
-            raise ValueError(f"unknown task {source!r}; run 'hrlp tasks' to list them (only hrlp tasks render)")
         if steps < 0 or width < 16 or height < 16:
             raise ValueError("--steps must be >= 0 and --width/--height >= 16")
         if camera not in ("front", "side"):
             raise ValueError(f"--camera must be 'front' or 'side', got {camera!r}")
         check_video_path(out)
-    except ValueError as e:
+        frames, fps, name = rollout_frames(source, steps, seed, err_console, width=width, height=height, camera=camera)
+    except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
-    env = make(name, render_mode="rgb_array", width=width, height=height, camera=camera)
-    n = steps or env.episode_steps
-    obs, _ = env.reset(seed=seed)
+    count = write_video(out, frames, fps=fps)
+    console.print(f"wrote {out} ({count} frames, {count / fps:.1f} s) of {name}")
 
-    def frames():
-        nonlocal obs
-        yield env.render()
-        for _ in track(range(n), description=f"rendering {name}", console=err_console, transient=True):
-            obs, _, terminated, truncated, _ = env.step(np.clip(act(obs), -1.0, 1.0))
-            yield env.render()
-            if terminated or truncated:
-                obs, _ = env.reset()
 
-    count = write_video(out, frames(), fps=env.metadata["render_fps"])
-    env.close()
-    console.print(f"wrote {out} ({count} frames, {count / env.metadata['render_fps']:.1f} s)")
+@app.command()
+def demo(
+    out_dir: Annotated[Path, typer.Option(help="Run directory (run again to continue it).")] = Path("runs/demo"),
+    steps: Annotated[int, typer.Option(help="Low-level environment steps of Manager training.")] = 1_500_000,
+    seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes for the success rate.")] = 100,
+) -> None:
+    """Train a Manager on reach-and-grip with the shipped skills; print its success rate, write a video and a plot."""
+    from hrlp.checkpoint import CheckpointError
+    from hrlp.experiments.demo import run_demo
+
+    try:
+        if steps <= 0 or episodes <= 0:
+            raise ValueError("--steps and --episodes must be positive")
+        res = run_demo(out_dir, steps, seed, episodes, err_console)
+    except (ValueError, CheckpointError) as e:
+        raise _fail(str(e)) from None
+    console.print(f"success rate: {res.success}")
+    console.print(f"video: {res.video}\nlearning curve: {res.plot}\nrun: {res.run_dir} (hrlp eval / hrlp render work on it)")
 
 
 @app.command()
@@ -110,36 +104,107 @@ def theory(
     run_theory(mdps=mdps, seed=seed, out_dir=out, console=console)
 
 
+_STEPS = Annotated[int | None, typer.Option(help="Low-level environment steps in total (default 1,000,000).")]
+_SEED = Annotated[int, typer.Option(help="Seed of environments, network and action noise.")]
+_RUN_DIR = Annotated[Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).")]
+_NUM_ENVS = Annotated[int, typer.Option(help="Environments stepped together with batched inference.")]
+_MAX_KL = Annotated[float, typer.Option(help="TRPO's trust region, the maximal mean KL per step.")]
+_GAMMA = Annotated[float, typer.Option(help="Discount factor (per low-level step).")]
+_EPISODE_STEPS = Annotated[int | None, typer.Option(help="Episode length of hrlp tasks (default 300).")]
+_TASK_ARG = Annotated[
+    list[str] | None,
+    typer.Option("--task-arg", help="A task argument NAME=VALUE, repeatable, e.g. --task-arg c1=-10 --task-arg tr=0.06."),
+]
+_RESUME = Annotated[
+    bool, typer.Option(help="Continue the run in --run-dir from its last checkpoint with its own settings (--steps may grow).")
+]
+
+
 @app.command()
 def train(
-    task: Annotated[str, typer.Argument(help="hrlp task (see 'hrlp tasks') or a Gymnasium id with a Box action space.")],
-    steps: Annotated[int | None, typer.Option(help="Environment steps in total (default 1,000,000).")] = None,
-    seed: Annotated[int, typer.Option(help="Seed of environments, network and action noise.")] = 0,
-    run_dir: Annotated[Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).")] = None,
+    task: Annotated[str, typer.Argument(help="hrlp task (see 'hrlp tasks') or a Gymnasium id.")],
+    steps: _STEPS = None,
+    seed: _SEED = 0,
+    run_dir: _RUN_DIR = None,
     batch_steps: Annotated[int, typer.Option(help="Environment steps per TRPO iteration (paper: 50,000).")] = 50_000,
-    num_envs: Annotated[int, typer.Option(help="Environments stepped together with batched inference.")] = 16,
-    max_kl: Annotated[float, typer.Option(help="TRPO's trust region, the maximal mean KL per step.")] = 0.01,
-    gamma: Annotated[float, typer.Option(help="Discount factor.")] = 0.99,
-    episode_steps: Annotated[int | None, typer.Option(help="Episode length of hrlp tasks (default 300).")] = None,
-    resume: Annotated[
-        bool,
-        typer.Option(help="Continue the run in --run-dir from its last checkpoint, with its own settings (--steps may grow)."),
-    ] = False,
+    num_envs: _NUM_ENVS = 16,
+    max_kl: _MAX_KL = 0.01,
+    gamma: _GAMMA = 0.99,
+    episode_steps: _EPISODE_STEPS = None,
+    task_arg: _TASK_ARG = None,
+    resume: _RESUME = False,
 ) -> None:
-    """Train a flat TRPO policy; logs to progress.csv and TensorBoard, checkpoints after every iteration."""
+    """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
+    _train(task, None, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, resume)
+
+
+@app.command("train-manager")
+def train_manager(
+    task: Annotated[str, typer.Argument(help="hrlp task the Manager solves, e.g. ReachAndGrip2.")],
+    skills: Annotated[
+        str, typer.Option(help="Comma-separated skill names (see 'hrlp skills list'), e.g. gripper,reacher.")
+    ] = "",
+    micro: Annotated[bool, typer.Option(help="Add the micro-action: direct torque control.")] = False,
+    micro_duration: Annotated[int, typer.Option(help="Low-level steps a micro-action lasts.")] = 1,
+    micro_penalty: Annotated[float, typer.Option(help="Penalty per use of the micro-action.")] = 0.0,
+    micro_max_torque: Annotated[float, typer.Option(help="Torque bound of the micro-action, in (0, 1].")] = 1.0,
+    k: Annotated[int | None, typer.Option(help="Low-level steps per skill call (default: each skill's own k).")] = None,
+    library: Annotated[Path | None, typer.Option(help="Skill library searched first.")] = None,
+    steps: _STEPS = None,
+    seed: _SEED = 0,
+    run_dir: _RUN_DIR = None,
+    batch_steps: Annotated[int, typer.Option(help="Manager decisions per TRPO iteration (paper: 5,000).")] = 5_000,
+    num_envs: _NUM_ENVS = 16,
+    max_kl: _MAX_KL = 0.01,
+    gamma: _GAMMA = 0.99,
+    episode_steps: _EPISODE_STEPS = None,
+    task_arg: _TASK_ARG = None,
+    resume: _RESUME = False,
+) -> None:
+    """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration."""
+    from hrlp.skills.macro_env import MacroSpec, MicroAction
+
+    try:
+        names = tuple(s.strip() for s in skills.split(",") if s.strip())
+        m = MicroAction(micro_duration, micro_penalty, micro_max_torque) if micro else None
+        spec = MacroSpec(names, k, m, None if library is None else str(library))
+    except ValueError as e:
+        raise _fail(str(e)) from None
+    _train(task, spec, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, resume)
+
+
+def parse_task_args(items: list[str] | None) -> dict[str, Any]:
+    """``["c1=-10", "tr=0.06"]`` -> ``{"c1": -10, "tr": 0.06}`` (values read as JSON, else kept as strings)."""
+    import json
+
+    out: dict[str, Any] = {}
+    for item in items or []:
+        name, sep, raw = item.partition("=")
+        if not sep or not name.strip():
+            raise ValueError(f"--task-arg must look like NAME=VALUE, got {item!r}")
+        try:
+            out[name.strip()] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[name.strip()] = raw
+    return out
+
+
+def _train(task, macro, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, resume) -> Path:
+    """Shared body of ``train`` and ``train-manager``: build and check the config, then train with a progress bar."""
     import dataclasses
     import math
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     from hrlp.algos.trpo import TRPOConfig
+    from hrlp.checkpoint import CheckpointError
     from hrlp.train import TrainConfig, env_factory
     from hrlp.train import train as run_training
 
     out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{seed}"
     try:
         if resume:
-            from hrlp.checkpoint import CheckpointError, load_checkpoint
+            from hrlp.checkpoint import load_checkpoint
 
             if not (out / "checkpoint").exists():
                 raise ValueError(f"--resume: {out} has no checkpoint to continue from")
@@ -152,22 +217,27 @@ def train(
             if (out / "checkpoint").exists():
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
             cfg = TrainConfig(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
-                              episode_steps=episode_steps,
-                              trpo=dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma))  # fmt: skip
-        env_factory(cfg.task, cfg.episode_steps)
-    except ValueError as e:
+                              episode_steps=episode_steps, trpo=dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma),
+                              macro=macro, task_kwargs=parse_task_args(task_arg))  # fmt: skip
+        env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
+    except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
     columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                TextColumn("{task.fields[status]}")]  # fmt: skip
-    with Progress(*columns, console=err_console) as progress:
-        bar = progress.add_task(f"train {cfg.task}", total=cfg.iterations * cfg.steps_per_env * cfg.num_envs, status="")
-        for st in run_training(cfg, out, resume=resume):
-            status = f"return {st['return_mean']:.1f}"
-            if not math.isnan(st["success_rate"]):
-                status += f"  success {st['success_rate']:.2f}"
-            status += f"  kl {st['trpo/kl']:.4f}  {st['time/steps_per_s']:.0f} steps/s"
-            progress.update(bar, completed=st["env_steps"], status=status)
+    kind = "train-manager" if cfg.macro is not None else "train"
+    try:
+        with Progress(*columns, console=err_console) as progress:
+            bar = progress.add_task(f"{kind} {cfg.task}", total=cfg.steps, status="")
+            for st in run_training(cfg, out, resume=resume):
+                status = f"return {st['return_mean']:.1f}"
+                if not math.isnan(st["success_rate"]):
+                    status += f"  success {st['success_rate']:.2f}"
+                status += f"  kl {st['trpo/kl']:.4f}  {st['time/steps_per_s']:.0f} steps/s"
+                progress.update(bar, completed=min(st["env_steps"], cfg.steps), status=status)
+    except (ValueError, CheckpointError) as e:
+        raise _fail(str(e)) from None
     console.print(f"run written to {out} (checkpoint: {out / 'checkpoint'}, logs: progress.csv, tb/)")
+    return out
 
 
 @app.command("eval")
@@ -191,6 +261,8 @@ def eval_(
         console.print(f"success rate (95% Wilson CI): {ev.success}")
     if ev.target_dist_sum is not None:
         console.print(f"TargetDistSum (mean, 95% CI): {ev.target_dist_sum}")
+    if ev.macro_usage is not None:
+        console.print("decisions per macro-action: " + ", ".join(f"{k} {v:.0%}" for k, v in ev.macro_usage.items()))
 
 
 skills_app = typer.Typer(help="The skill library: frozen, parameterised skills for the Manager.", no_args_is_help=True)
@@ -202,16 +274,22 @@ _LIBRARY = Annotated[
 
 @skills_app.command("list")
 def skills_list(library: _LIBRARY = None) -> None:
-    """List the skills in the library."""
-    from hrlp.skills import SkillLibrary
+    """List the skills in the library and those shipped with hrlp (a library skill hides a shipped one of its name)."""
+    from hrlp.skills import SkillLibrary, shipped_library_root
 
-    lib = SkillLibrary(library)
-    table = Table(title=f"skills in {lib.root}")
-    for col in ("name", "task", "params", "k", "trained steps", "sha256"):
+    lib, shipped = SkillLibrary(library), SkillLibrary(shipped_library_root())
+    table = Table(title=f"skills in {lib.root} and shipped with hrlp")
+    for col in ("name", "task", "params", "k", "trained steps", "sha256", "from"):
         table.add_column(col)
-    for name in lib.names():
-        m = lib.manifest(name)
-        table.add_row(name, m["task"], str(m["param"]["dim"]), str(m["k"]), f"{m['trained']['env_steps']:,}", m["sha256"][:12])
+    seen: set[str] = set()
+    for source, where in ((lib, "library"), (shipped, "shipped")):
+        for name in source.names():
+            if name in seen:
+                continue
+            seen.add(name)
+            m = source.manifest(name)
+            table.add_row(name, m["task"], str(m["param"]["dim"]), str(m["k"]), f"{m['trained']['env_steps']:,}",
+                          m["sha256"][:12], where)  # fmt: skip
     console.print(table)
 
 
@@ -220,10 +298,11 @@ def skills_show(name: Annotated[str, typer.Argument(help="Skill name.")], librar
     """Show a skill's manifest: task, parameters and their meaning, default k, training config, content hash."""
     import json
 
-    from hrlp.skills import SkillLibrary
+    from hrlp.skills import SkillLibrary, shipped_library_root
 
+    lib, shipped = SkillLibrary(library), SkillLibrary(shipped_library_root())
     try:
-        m = SkillLibrary(library).manifest(name)
+        m = (lib if name in lib.names() or name not in shipped.names() else shipped).manifest(name)
     except ValueError as e:
         raise _fail(str(e)) from None
     console.print_json(json.dumps(m))

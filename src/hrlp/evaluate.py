@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,38 +58,46 @@ class Evaluation:
     ret: Interval
     success: Interval | None
     target_dist_sum: Interval | None
+    macro_usage: dict[str, float] | None = None
+    """For a Manager: the share of its decisions that chose each skill (and the micro-action)."""
 
 
 def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, deterministic: bool = True) -> Evaluation:
-    """Run ``episodes`` episodes of the run's policy (normaliser frozen) and summarise them."""
-    from hrlp.train import TrainConfig, env_factory, load_policy
+    """Run ``episodes`` episodes of the run's policy (normaliser frozen) and summarise them.
+
+    Returns count the task's own rewards, undiscounted, over low-level steps, for flat policies and Managers alike.
+    """
+    from hrlp.train import load_trained
 
     if episodes <= 0:
         raise ValueError(f"episodes must be a positive integer, got {episodes}")
-    policy, normalizer, meta = load_policy(run_dir / "checkpoint")
-    cfg = TrainConfig.from_json(meta["config"])
-    env = env_factory(cfg.task, cfg.episode_steps)()
-    low, high = env.action_space.low, env.action_space.high
+    trained = load_trained(run_dir)
+    env = trained.make_env()
     gen = torch.Generator().manual_seed(seed)
     done_eps: list[Episode] = []
+    usage: Counter[str] = Counter()
     for k in range(episodes):
         obs, info = env.reset(seed=seed + k)
         ret, length = 0.0, 0
         while True:
-            a = policy.act_numpy(normalizer(obs, update=False).astype(np.float32), gen, deterministic)
-            obs, r, term, trunc, info = env.step(np.clip(a, low, high))
-            ret += float(r)
-            length += 1
+            obs, r, term, trunc, info = env.step(trained.act(env, obs, gen, deterministic))
+            ret += float(info.get("task_reward", r))
+            length += int(info.get("tau", 1))
+            if "macro" in info:
+                usage[info["macro"]] += 1
             if term or trunc:
                 break
         s, tds = info.get("success"), info.get("target_dist_sum")
         done_eps.append(Episode(ret, length, None if s is None else bool(s), None if tds is None else float(tds)))
+    names = getattr(env, "names", None)
     env.close()
     succ = [e.success for e in done_eps if e.success is not None]
     tds = [e.target_dist_sum for e in done_eps if e.target_dist_sum is not None]
+    total = sum(usage.values())
     return Evaluation(
         episodes=episodes,
         ret=mean_interval([e.ret for e in done_eps]),
         success=wilson_interval(sum(succ), len(succ)) if succ else None,
         target_dist_sum=mean_interval(tds) if tds else None,
+        macro_usage={n: usage[n] / total for n in names} if names and total else None,
     )

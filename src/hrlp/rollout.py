@@ -17,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from hrlp.policies.distributions import flat_to_tuples
 from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
 
@@ -31,10 +32,12 @@ class Batch:
     rewards: torch.Tensor  # [T, N]
     terminated: torch.Tensor  # [T, N] bool: the MDP ended (no bootstrap)
     truncated: torch.Tensor  # [T, N] bool: cut by a time limit or fault (bootstrap from next_obs)
+    discount: torch.Tensor | None = None  # [T, N] gamma^tau per decision (macro-actions); None: gamma every step
+    env_steps: int = 0  # low-level environment steps (T * N for flat policies, the sum of the taus for a Manager)
 
     @property
     def steps(self) -> int:
-        """Environment steps in the batch (T * N)."""
+        """Decisions in the batch (T * N)."""
         return self.rewards.numel()
 
 
@@ -43,9 +46,9 @@ class Episode:
     """One finished episode's summary."""
 
     ret: float
-    """Undiscounted return."""
+    """Undiscounted return of the task's rewards."""
     length: int
-    """Steps."""
+    """Low-level environment steps."""
     success: bool | None
     """``info['success']`` at the end (Definition 1 on gripping tasks), None if the task has no success test."""
     target_dist_sum: float | None = None
@@ -84,10 +87,9 @@ class Sampler:
         self.envs = [fn() for fn in env_fns]
         self.policy = policy
         self.normalizer = normalizer
-        space = self.envs[0].action_space
-        if not isinstance(space, gym.spaces.Box):
-            raise ValueError(f"flat training needs a Box action space, got {space}")
-        self._low, self._high = space.low, space.high
+        self._decode = action_decoder(self.envs[0].action_space)
+        # Environments that step together (the Manager's MacroEnv: batched skill inference) provide step_batch.
+        self._step_batch = getattr(type(self.envs[0]), "step_batch", None)
         self.generator = torch.Generator().manual_seed(seed)
         self._obs = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(self.envs)]).astype(np.float64)
         n = len(self.envs)
@@ -108,10 +110,12 @@ class Sampler:
         rewards = np.empty((steps_per_env, n))
         terminated = np.zeros((steps_per_env, n), dtype=bool)
         truncated = np.zeros((steps_per_env, n), dtype=bool)
+        discount = np.empty((steps_per_env, n)) if self._step_batch is not None else None
         actions_buf: np.ndarray | None = None
         episodes: list[Episode] = []
         next_raw = np.empty((n, dim))
         raw_buf = np.empty((steps_per_env, n, dim))
+        env_steps = 0
         for t in range(steps_per_env):
             t0 = time.perf_counter()
             raw_buf[t] = self._obs
@@ -120,19 +124,33 @@ class Sampler:
             if actions_buf is None:
                 actions_buf = np.empty((steps_per_env, *actions.shape))
             actions_buf[t] = actions
-            clipped = np.clip(actions, self._low, self._high)
             t1 = time.perf_counter()
-            for i, env in enumerate(self.envs):
-                obs, r, term, trunc, info = env.step(clipped[i])
-                rewards[t, i] = r
-                next_raw[i] = obs
-                self._ret[i] += r
-                self._len[i] += 1
-                if term or trunc:
-                    terminated[t, i], truncated[t, i] = term, (trunc and not term)
-                    episodes.append(self._finish(i, info))
-                    obs, _ = env.reset()
-                self._obs[i] = obs
+            if self._step_batch is not None:
+                res = self._step_batch(self.envs, actions)
+                assert discount is not None
+                rewards[t], discount[t], next_raw[:] = res.rewards, res.discount, res.obs
+                self._ret += res.task_reward
+                self._len += res.tau
+                env_steps += int(res.tau.sum())
+                terminated[t], truncated[t] = res.terminated, res.truncated
+                self._obs[:] = res.obs
+                for i in np.flatnonzero(res.terminated | res.truncated):
+                    episodes.append(self._finish(i, res.infos[i]))
+                    self._obs[i] = self.envs[i].reset()[0]
+            else:
+                decoded = self._decode(actions)
+                for i, env in enumerate(self.envs):
+                    obs, r, term, trunc, info = env.step(decoded[i])
+                    rewards[t, i] = r
+                    next_raw[i] = obs
+                    self._ret[i] += r
+                    self._len[i] += 1
+                    if term or trunc:
+                        terminated[t, i], truncated[t, i] = term, (trunc and not term)
+                        episodes.append(self._finish(i, info))
+                        obs, _ = env.reset()
+                    self._obs[i] = obs
+                env_steps += n
             t2 = time.perf_counter()
             next_buf[t] = self.normalizer.normalize(next_raw)
             self.timing.inference += t1 - t0
@@ -148,6 +166,8 @@ class Sampler:
             rewards=torch.as_tensor(rewards, dtype=f32),
             terminated=torch.as_tensor(terminated),
             truncated=torch.as_tensor(truncated),
+            discount=None if discount is None else torch.as_tensor(discount, dtype=f32),
+            env_steps=env_steps,
         )
         return batch, episodes
 
@@ -194,6 +214,45 @@ class Sampler:
         """Close every environment."""
         for env in self.envs:
             env.close()
+
+
+def action_decoder(space: gym.Space) -> Callable[[np.ndarray], Sequence]:
+    """How the policy's batched actions ``[N, ...]`` become ``N`` environment actions for ``space``.
+
+    Box: clipped to the bounds. Discrete: integers. ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` (a parameterised
+    action space): ``(k, u_1, ..., u_n)`` tuples with each block clipped to its bounds. Other spaces raise ValueError.
+    """
+    if isinstance(space, gym.spaces.Box):
+        low, high = space.low, space.high
+        return lambda a: np.clip(a, low, high)
+    if isinstance(space, gym.spaces.Discrete):
+        start = int(space.start)
+        return lambda a: (a.reshape(-1).astype(np.int64) + start).tolist()
+    dims = parameterised_dims(space)
+    blocks = space.spaces[1:]
+
+    def decode(a: np.ndarray) -> list[tuple]:
+        return [(k, *(np.clip(u, b.low, b.high) for u, b in zip(us, blocks, strict=True)))
+                for k, *us in flat_to_tuples(a, dims)]  # fmt: skip
+
+    return decode
+
+
+def parameterised_dims(space: gym.Space) -> tuple[int, ...]:
+    """The block sizes ``(d_1, ..., d_n)`` of a ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` space; ValueError otherwise."""
+    ok = (
+        isinstance(space, gym.spaces.Tuple)
+        and len(space.spaces) >= 2
+        and isinstance(space.spaces[0], gym.spaces.Discrete)
+        and int(space.spaces[0].start) == 0
+        and int(space.spaces[0].n) == len(space.spaces) - 1
+        and all(isinstance(b, gym.spaces.Box) and len(b.shape) == 1 for b in space.spaces[1:])
+    )
+    if not ok:
+        raise ValueError(
+            f"unsupported action space {space}: use Box, Discrete, or Tuple(Discrete(n), Box(d_1), ..., Box(d_n))"
+        )
+    return tuple(int(b.shape[0]) for b in space.spaces[1:])
 
 
 def mean_or_nan(values: Sequence[float | None]) -> float:

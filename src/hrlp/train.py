@@ -1,6 +1,9 @@
 """The one training loop: collect, advantages, fit the baseline, policy step, log.
 
-Flat policies on any hrlp task or any Gymnasium id with a Box action space go through it.
+Flat policies (any hrlp task, any Gymnasium id with a Box, Discrete or parameterised
+``Tuple(Discrete(n), Box, ...)`` action space) and Managers (an hrlp task wrapped in a
+:class:`~hrlp.skills.macro_env.MacroEnv` of frozen skills) go through the same loop; the
+Manager's batch carries the per-decision discount gamma^tau that GAE applies.
 """
 
 from __future__ import annotations
@@ -23,21 +26,22 @@ from hrlp.algos.kernels import gae
 from hrlp.algos.trpo import TRPOConfig, trpo_update
 from hrlp.algos.value import ValueFitConfig, fit_value
 from hrlp.checkpoint import load_checkpoint, load_module, module_tensors, pack_generators, save_checkpoint, unpack_generators
-from hrlp.policies.mlp import GaussianPolicy, ValueNet
+from hrlp.policies.mlp import GaussianPolicy, Policy, ValueNet, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.rollout import Sampler, mean_or_nan
+from hrlp.rollout import Sampler, action_decoder, mean_or_nan
+from hrlp.skills.macro_env import MacroEnv, MacroSpec
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Settings of a flat TRPO run (defaults from the paper's Appendix D)."""
+    """Settings of a TRPO run, flat or Manager (defaults from the paper's Appendix D)."""
 
     task: str
-    """An hrlp task name (``hrlp tasks``) or a Gymnasium id with a Box action space, e.g. Pusher-v5."""
+    """An hrlp task name (``hrlp tasks``) or a Gymnasium id, e.g. Pusher-v5."""
     steps: int = 1_000_000
-    """Environment steps in total."""
+    """Low-level environment steps in total (a Manager's macro-action of tau steps counts tau)."""
     batch_steps: int = 50_000
-    """Environment steps per TRPO iteration (the paper: 50,000 for flat runs)."""
+    """Decisions per TRPO iteration (the paper: 50,000 for flat runs, 5,000 for Managers)."""
     num_envs: int = 16
     """Environments stepped together with batched inference."""
     seed: int = 0
@@ -50,6 +54,10 @@ class TrainConfig:
     """TRPO settings (max KL 0.01, gamma 0.99, ...)."""
     value: ValueFitConfig = field(default_factory=ValueFitConfig)
     """Value-baseline fit settings."""
+    macro: MacroSpec | None = None
+    """For a Manager: its skills, their duration k and the micro-action; None for a flat policy."""
+    task_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Arguments of the task, e.g. ``{"c1": -10.0}`` (Gripper reward constants) or ``{"curriculum_alpha": 1e-4}``."""
 
     def __post_init__(self) -> None:
         for name in ("steps", "batch_steps", "num_envs"):
@@ -62,16 +70,13 @@ class TrainConfig:
             raise ValueError(f"episode_steps must be a positive integer, got {self.episode_steps!r}")
         if not self.hidden or any(h <= 0 for h in self.hidden):
             raise ValueError(f"hidden must be positive layer widths, got {self.hidden!r}")
+        if not isinstance(self.task_kwargs, dict) or not all(isinstance(k, str) for k in self.task_kwargs):
+            raise ValueError(f"task_kwargs must map argument names to values, got {self.task_kwargs!r}")
 
     @property
     def steps_per_env(self) -> int:
-        """Steps each environment takes per iteration."""
+        """Decisions each environment takes per iteration."""
         return math.ceil(self.batch_steps / self.num_envs)
-
-    @property
-    def iterations(self) -> int:
-        """TRPO iterations needed to cover ``steps``."""
-        return math.ceil(self.steps / (self.steps_per_env * self.num_envs))
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-serialisable dict of every setting."""
@@ -84,11 +89,16 @@ class TrainConfig:
         d["hidden"] = tuple(d["hidden"])
         d["trpo"] = TRPOConfig(**d["trpo"])
         d["value"] = ValueFitConfig(**d["value"])
+        d["macro"] = MacroSpec.from_json(d["macro"]) if d.get("macro") else None
         return cls(**d)
 
 
-def env_factory(task: str, episode_steps: int | None = None, **kwargs: Any) -> Callable[[], gym.Env]:
-    """A constructor for ``task``: an hrlp task name/id or a Gymnasium id. Raises ValueError for an unknown task."""
+def env_factory(
+    task: str, episode_steps: int | None = None, macro: MacroSpec | None = None, gamma: float = 0.99, **kwargs: Any
+) -> Callable[[], gym.Env]:
+    """A constructor for ``task`` (an hrlp task name/id or a Gymnasium id), wrapped in a :class:`MacroEnv` of
+    ``macro``'s skills (loaded once, shared, frozen) for a Manager. Raises ValueError for an unknown task, a
+    missing skill, or an unsupported action space, before any compute."""
     from hrlp.envs import TASKS, make
 
     name = task.removeprefix("hrlp/").removesuffix("-v0")
@@ -96,30 +106,38 @@ def env_factory(task: str, episode_steps: int | None = None, **kwargs: Any) -> C
         kw = dict(kwargs)
         if episode_steps is not None:
             kw["episode_steps"] = episode_steps
-        make(name, **kw)  # validate arguments now, before any compute
-        return lambda: make(name, **kw)
+        make(name, **kw).close()  # validate arguments now, before any compute
+        if macro is None:
+            return lambda: make(name, **kw)
+        skills = macro.load_skills()
+        return lambda: MacroEnv(make(name, **kw), skills, macro.k, macro.micro, gamma)
+    if macro is not None:
+        raise ValueError(f"{task}: a Manager commands arm skills, so its task must be an hrlp task (see 'hrlp tasks')")
     if task not in gym.registry:
         raise ValueError(f"unknown task {task!r}: not an hrlp task (see 'hrlp tasks') nor a registered Gymnasium id")
     probe = gym.make(task, **kwargs)
     space = probe.action_space
     probe.close()
-    if not isinstance(space, gym.spaces.Box):
-        raise ValueError(f"{task}: flat training needs a Box action space, got {space}")
+    try:
+        action_decoder(space)
+    except ValueError as e:
+        raise ValueError(f"{task}: {e}") from None
     return lambda: gym.make(task, **kwargs)
 
 
 class Trainer:
-    """Flat TRPO on one task: owns the policy, the baseline, the normaliser and the sampler."""
+    """TRPO on one task, flat or Manager: owns the policy, the baseline, the normaliser and the sampler."""
 
     def __init__(self, cfg: TrainConfig) -> None:
         self.cfg = cfg
-        factory = env_factory(cfg.task, cfg.episode_steps)
+        factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
         torch.manual_seed(cfg.seed)
         probe = factory()
         obs_dim = int(np.prod(probe.observation_space.shape))
-        act_dim = int(np.prod(probe.action_space.shape))
+        self.skill_hashes = {s.name: s.content_hash for s in probe.skills} if isinstance(probe, MacroEnv) else {}
+        self.policy = policy_for_space(obs_dim, probe.action_space, cfg.hidden)
+        self.obs_dim = obs_dim
         probe.close()
-        self.policy = GaussianPolicy(obs_dim, act_dim, cfg.hidden)
         self.value_net = ValueNet(obs_dim, cfg.hidden)
         self.normalizer = RunningNormalizer(obs_dim)
         self.sampler = Sampler([factory] * cfg.num_envs, self.policy, self.normalizer, seed=cfg.seed)
@@ -139,8 +157,9 @@ class Trainer:
         with torch.no_grad():
             values = self.value_net(obs).reshape(T, N)
             next_values = self.value_net(batch.next_obs.reshape(T * N, D)).reshape(T, N)
-        adv = gae(batch.rewards, values, next_values, batch.terminated, batch.truncated, cfg.trpo.gamma, cfg.trpo.gae_lambda)
-        actions = batch.actions.reshape(T * N, -1)
+        adv = gae(batch.rewards, values, next_values, batch.terminated, batch.truncated, cfg.trpo.gamma, cfg.trpo.gae_lambda,
+                  discount=batch.discount)  # fmt: skip
+        actions = batch.actions.reshape(T * N, *batch.actions.shape[2:])
         with torch.no_grad():
             old_dist = self.policy(obs)
         stats = trpo_update(
@@ -149,7 +168,7 @@ class Trainer:
         vstats = fit_value(self.value_net, obs, adv.returns.reshape(-1), cfg.value)
         t2 = time.perf_counter()
         self.iteration += 1
-        self.env_steps += batch.steps
+        self.env_steps += batch.env_steps
         wall = t2 - t0
         out: dict[str, float] = {
             "iteration": self.iteration,
@@ -165,8 +184,11 @@ class Trainer:
             "time/env_share": (timing.env - env0) / wall,
             "time/inference_share": (timing.inference - inf0) / wall,
             "time/update_share": (t2 - t1) / wall,
-            "time/steps_per_s": batch.steps / wall,
+            "time/steps_per_s": batch.env_steps / wall,
         }
+        if cfg.macro is not None:
+            out["manager/decisions"] = batch.steps
+            out["manager/mean_tau"] = batch.env_steps / batch.steps
         return out
 
     # --- persistence --------------------------------------------------------------------------
@@ -179,14 +201,16 @@ class Trainer:
         meta = {
             **rng_meta,
             "sampler": self.sampler.get_state(),
-            "kind": "flat",
+            "kind": "flat" if self.cfg.macro is None else "manager",
+            "skills": self.skill_hashes,
             "config": self.cfg.to_json(),
             "iteration": self.iteration,
             "env_steps": self.env_steps,
             "normalizer": self.normalizer.config(),
-            "obs_dim": self.policy.mean_net[0].in_features,
-            "act_dim": int(self.policy.log_std.numel()),
+            "obs_dim": self.obs_dim,
         }
+        if isinstance(self.policy, GaussianPolicy):
+            meta["act_dim"] = int(self.policy.log_std.numel())
         return tensors, meta
 
     @classmethod
@@ -198,6 +222,7 @@ class Trainer:
         """
         tensors, meta = load_checkpoint(directory)
         trainer = cls(TrainConfig.from_json(meta["config"]))
+        check_skill_hashes(meta.get("skills", {}), trainer.skill_hashes, directory)
         load_module("policy", trainer.policy, tensors)
         load_module("value", trainer.value_net, tensors)
         trainer.normalizer.load_state_dict({k.removeprefix("normalizer."): v for k, v in tensors.items()
@@ -213,11 +238,52 @@ class Trainer:
         return save_checkpoint(directory, tensors, meta)
 
 
-def load_policy(directory: Path) -> tuple[GaussianPolicy, RunningNormalizer, dict[str, Any]]:
-    """The trained policy and its frozen observation normaliser from a checkpoint directory."""
+def check_skill_hashes(saved: dict[str, str], loaded: dict[str, str], where: Path) -> None:
+    """Raise ValueError if a skill a Manager was trained with has changed since (its content hash differs)."""
+    for name, h in saved.items():
+        if loaded.get(name) != h:
+            raise ValueError(
+                f"{where}: skill {name!r} has changed since this Manager was trained "
+                f"(sha256 {h[:12]} then, {str(loaded.get(name))[:12]} now)"
+            )
+
+
+@dataclass
+class TrainedPolicy:
+    """A trained run's policy ready to act in its environment: frozen normaliser, actions decoded for the env."""
+
+    policy: Policy
+    normalizer: RunningNormalizer
+    config: TrainConfig
+    meta: dict[str, Any]
+
+    def make_env(self, **kwargs: Any) -> gym.Env:
+        """A fresh environment of the run (a :class:`MacroEnv` for a Manager); ``kwargs`` go to the task."""
+        cfg = self.config
+        return env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **{**cfg.task_kwargs, **kwargs})()
+
+    def act(self, env: gym.Env, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> Any:
+        """The action for one raw observation, in ``env``'s action space (clipped / a parameterised tuple)."""
+        a = self.policy.act_numpy(self.normalizer(obs, update=False)[None].astype(np.float32), generator, deterministic)
+        return action_decoder(env.action_space)(a)[0]
+
+
+def load_trained(run_dir: Path) -> TrainedPolicy:
+    """The policy of the run in ``run_dir`` (its ``checkpoint``), ready to act."""
+    policy, normalizer, meta = load_policy(Path(run_dir) / "checkpoint")
+    return TrainedPolicy(policy, normalizer, TrainConfig.from_json(meta["config"]), meta)
+
+
+def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, Any]]:
+    """The trained policy (flat or Manager) and its frozen observation normaliser from a checkpoint directory."""
     tensors, meta = load_checkpoint(directory)
     cfg = TrainConfig.from_json(meta["config"])
-    policy = GaussianPolicy(meta["obs_dim"], meta["act_dim"], cfg.hidden)
+    env = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)()
+    obs_dim = int(np.prod(env.observation_space.shape))
+    if isinstance(env, MacroEnv):
+        check_skill_hashes(meta.get("skills", {}), {s.name: s.content_hash for s in env.skills}, directory)
+    policy = policy_for_space(obs_dim, env.action_space, cfg.hidden)
+    env.close()
     load_module("policy", policy, tensors)
     normalizer = RunningNormalizer.from_config(
         meta["normalizer"], {k.removeprefix("normalizer."): v for k, v in tensors.items() if k.startswith("normalizer.")}
@@ -279,7 +345,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> Iterator[dic
     (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2))
     logger = RunLogger(run_dir)
     try:
-        while trainer.iteration < cfg.iterations:
+        while trainer.env_steps < cfg.steps:
             stats = trainer.iterate()
             trainer.save(run_dir / "checkpoint")
             logger.log(stats)

@@ -29,8 +29,6 @@ def test_action_space_is_a_parameterised_tuple_and_the_env_checker_passes(skills
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         warnings.filterwarnings("ignore", message=".*Box observation space (minimum|maximum) value is")
-        # Skill parameters are physical positions in metres, deliberately not rescaled to [-1, 1].
-        warnings.filterwarnings("ignore", message=".*recommend using a symmetric and normalized space")
         check_env(env, skip_render_check=True)
 
 
@@ -41,7 +39,9 @@ def test_a_macro_step_is_k_low_level_steps_with_discounted_reward(skills):
     macro.reset(seed=3)
     low_obs, _ = low.reset(seed=3)
     goal = np.array([0.1, 0.05, 0.1])
-    _, r, _, _, info = macro.step((1, np.zeros(0), goal))
+    block = macro.block(1, goal)  # the Manager's [-1, 1] block that passes this goal
+    assert np.abs(block).max() <= 1 and macro.parameters(1, block) == pytest.approx(goal)
+    _, r, _, _, info = macro.step((1, np.zeros(0), block))
     expected, g = 0.0, 1.0
     for _ in range(k):  # the same skill, driven by hand on a twin environment
         low_obs, lr, *_ = low.step(skills[1].act(low_obs[None, :24], goal[None])[0])

@@ -15,13 +15,23 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 
+import gymnasium as gym
 import numpy as np
 import torch
 from torch import Tensor, nn
 
 from hrlp.policies.distributions import Categorical, DiagGaussian, Distribution, Hierarchical, flat_to_tuples
 
-__all__ = ["CategoricalPolicy", "GaussianPolicy", "HierarchicalPolicy", "NumpyMLP", "Policy", "ValueNet", "mlp"]
+__all__ = [
+    "CategoricalPolicy",
+    "GaussianPolicy",
+    "HierarchicalPolicy",
+    "NumpyMLP",
+    "Policy",
+    "ValueNet",
+    "mlp",
+    "policy_for_space",
+]
 
 
 def mlp(
@@ -145,6 +155,19 @@ class HierarchicalPolicy(Policy):
     ) -> list[tuple]:
         """:meth:`act_numpy` for ``[N, obs_dim]`` converted to ``N`` gymnasium ``Tuple`` samples ``(k, u_1, ..., u_n)``."""
         return flat_to_tuples(self.act_numpy(np.atleast_2d(obs), generator, deterministic), self.param_dims)
+
+
+def policy_for_space(obs_dim: int, space: gym.Space, hidden: Sequence[int] = (64, 64)) -> Policy:
+    """The policy for an action space: Box -> Gaussian, Discrete -> categorical, ``Tuple(Discrete(n), Box(d_1), ...,
+    Box(d_n))`` -> hierarchical (the Manager). Raises ValueError for any other space."""
+    from hrlp.rollout import parameterised_dims
+
+    if isinstance(space, gym.spaces.Box):
+        return GaussianPolicy(obs_dim, int(np.prod(space.shape)), hidden)
+    if isinstance(space, gym.spaces.Discrete):
+        return CategoricalPolicy(obs_dim, int(space.n), hidden)
+    dims = parameterised_dims(space)
+    return HierarchicalPolicy(obs_dim, len(dims), dims, hidden)
 
 
 class ValueNet(nn.Module):

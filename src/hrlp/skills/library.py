@@ -25,9 +25,28 @@ def default_library_root() -> Path:
     return Path(os.environ.get("HRLP_SKILLS", Path.home() / ".hrlp" / "skills"))
 
 
+def shipped_library_root() -> Path:
+    """The small pretrained skills that come with hrlp (trained by ``benchmarks/train_skills.py``)."""
+    return Path(__file__).parent / "pretrained"
+
+
+def load_skill(name: str, library: str | Path | None = None) -> Skill:
+    """The named skill, frozen, from ``library`` (if given), the user's library, or the shipped skills, in that order."""
+    roots = [Path(library)] if library is not None else []
+    roots += [default_library_root(), shipped_library_root()]
+    for root in roots:
+        lib = SkillLibrary(root)
+        if name in lib.names():
+            return lib.load(name)
+    known = sorted({n for r in roots for n in SkillLibrary(r).names()})
+    raise ValueError(f"no skill {name!r} in {', '.join(map(str, roots))} (known: {', '.join(known) or 'none'})")
+
+
 def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     """The trained policy's tensors and the facts about it, from a run directory written by ``hrlp train``."""
     tensors, meta = load_checkpoint(Path(run_dir) / "checkpoint")
+    if meta.get("kind", "flat") != "flat":
+        raise ValueError(f"{run_dir}: a skill is a flat policy; this run trained a {meta['kind']}")
     task = meta["config"]["task"].removeprefix("hrlp/").removesuffix("-v0")
     if task not in PARAM_SPECS:
         raise ValueError(f"{run_dir}: a skill must be trained on one of {', '.join(PARAM_SPECS)}, this run trained {task}")
@@ -101,4 +120,4 @@ class SkillLibrary:
         return Skill(name, m["task"], param, int(m["k"]), policy, norm, self.manifest(name)["sha256"])
 
 
-__all__ = ["SkillLibrary", "default_library_root", "skill_from_run"]
+__all__ = ["SkillLibrary", "default_library_root", "load_skill", "shipped_library_root", "skill_from_run"]

@@ -3,18 +3,25 @@
 Section 1.1 and Figure 1: the Manager selects one of N macro-actions and passes it a vector of
 parameters; the macro-action then emits joint torques for k steps (8, 10 or 15 in the paper),
 or until the episode ends, and the Manager sees the state after it. The optional micro-action
-gives the Manager direct torque control for ``micro_k`` steps.
+gives the Manager direct torque control for ``duration`` steps.
 
 Action space: ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))``: the choice, then one parameter
 block per choice (the hierarchical distribution fills every block; only the chosen one is
-used). A macro-action lasting tau low-level steps returns the discounted in-macro reward
-``sum_j gamma^j r_j`` and ``info['discount'] = gamma^tau``, the factor the Manager's return and
-advantage estimator apply to the next decision (semi-Markov discounting).
+used). Every block is normalised to ``[-1, 1]``: a skill's block maps affinely onto its
+parameter box (:class:`~hrlp.skills.skill.ParamSpec`, e.g. the Reacher's reachable workspace
+in metres) and the micro-action's block is scaled by its torque bound. A macro-action lasting
+tau low-level steps returns the discounted in-macro reward ``sum_j gamma^j r_j`` and
+``info['discount'] = gamma^tau``, the factor the Manager's return and advantage estimator apply
+to the next decision (semi-Markov discounting).
+
+:func:`step_macros` runs one decision in each of ``N`` environments together, so every
+low-level step evaluates each skill once for all the environments running it (batched skill
+inference); :meth:`MacroEnv.step_batch` is how the sampler uses it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,6 +53,21 @@ class MicroAction:
             raise ValueError(f"MicroAction.max_torque must be in (0, 1], got {self.max_torque!r}")
 
 
+@dataclass(frozen=True)
+class MacroStep:
+    """One Manager decision in each of ``N`` environments."""
+
+    obs: np.ndarray  # [N, obs_dim] the observation after the macro-action
+    rewards: np.ndarray  # [N] discounted in-macro reward sum_j gamma^j r_j (minus the micro penalty)
+    terminated: np.ndarray  # [N] bool
+    truncated: np.ndarray  # [N] bool
+    discount: np.ndarray  # [N] gamma^tau
+    tau: np.ndarray  # [N] int, low-level steps taken
+    task_reward: np.ndarray  # [N] undiscounted sum of the task's rewards (what a flat policy's return counts)
+    choice: np.ndarray  # [N] int, the macro-action run
+    infos: list[dict[str, Any]]  # the last low-level info of each environment
+
+
 class MacroEnv(gym.Env):
     """A Manager's view of an arm task: choose a skill (or the micro-action) and its parameters.
 
@@ -56,6 +78,9 @@ class MacroEnv(gym.Env):
         micro: the micro-action, or None for none. With no skills and a micro-action this is the flat
             baseline through the same code.
         gamma: the low-level discount used inside a macro-action.
+
+    ``on_substep``, if set, is called with the active macro-action's name after every low-level step
+    (rendering uses it to record every frame and label it).
     """
 
     metadata = {"render_modes": ["rgb_array"]}  # noqa: RUF012 (Gymnasium's convention)
@@ -69,16 +94,35 @@ class MacroEnv(gym.Env):
         if not (0 < gamma <= 1):
             raise ValueError(f"gamma must be in (0, 1], got {gamma!r}")
         self.env, self.skills, self.micro, self.gamma = env, list(skills), micro, float(gamma)
-        self.durations = [k or s.k for s in self.skills] + ([micro.duration] if micro else [])
+        self.durations = np.array([k or s.k for s in self.skills] + ([micro.duration] if micro else []), dtype=np.int64)
         self.names = [s.name for s in self.skills] + (["micro"] if micro else [])
-        blocks = [gym.spaces.Box(np.array(s.param.low), np.array(s.param.high), dtype=np.float64) for s in self.skills]
+        low = [np.asarray(s.param.low, dtype=np.float64) for s in self.skills]
+        high = [np.asarray(s.param.high, dtype=np.float64) for s in self.skills]
         if micro:
-            blocks.append(gym.spaces.Box(-micro.max_torque, micro.max_torque, shape=(N_JOINTS,), dtype=np.float64))
-        self.param_dims = tuple(int(b.shape[0]) for b in blocks)
+            low.append(np.full(N_JOINTS, -micro.max_torque))
+            high.append(np.full(N_JOINTS, micro.max_torque))
+        self.param_dims = tuple(len(lo) for lo in low)
+        self.offsets = np.concatenate([[0], np.cumsum(self.param_dims)]).astype(np.int64)
+        lo_all = np.concatenate(low) if low else np.zeros(0)
+        hi_all = np.concatenate(high) if high else np.zeros(0)
+        self._centre, self._half = (hi_all + lo_all) / 2, (hi_all - lo_all) / 2
+        blocks = [gym.spaces.Box(-1.0, 1.0, shape=(d,), dtype=np.float64) for d in self.param_dims]
         self.action_space = gym.spaces.Tuple((gym.spaces.Discrete(len(blocks)), *blocks))
         self.observation_space = env.observation_space
         self.render_mode = env.render_mode
+        self.on_substep: Callable[[str], None] | None = None
         self._obs = np.zeros(env.observation_space.shape)
+
+    def parameters(self, choice: int, block: np.ndarray) -> np.ndarray:
+        """The chosen macro-action's parameters in its own units (metres, torques) from its block in [-1, 1]."""
+        lo, hi = self.offsets[choice], self.offsets[choice + 1]
+        return self._centre[lo:hi] + self._half[lo:hi] * np.clip(block, -1.0, 1.0)
+
+    def block(self, choice: int, params: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`parameters`: the block in [-1, 1] that passes ``params`` to macro-action ``choice``."""
+        lo, hi = self.offsets[choice], self.offsets[choice + 1]
+        half = np.where(self._half[lo:hi] > 0, self._half[lo:hi], 1.0)
+        return (np.asarray(params, dtype=np.float64) - self._centre[lo:hi]) / half
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         """Reset the low-level task."""
@@ -88,39 +132,37 @@ class MacroEnv(gym.Env):
 
     def step(self, action: tuple) -> tuple[np.ndarray, float, bool, bool, dict]:
         """Run the chosen macro-action; returns the discounted in-macro reward and ``info['discount']`` = gamma^tau."""
-        if not isinstance(action, tuple | list) or len(action) != 1 + len(self.param_dims):
-            raise ValueError(
-                f"Manager action must be a tuple (choice, {len(self.param_dims)} parameter blocks), got {action!r}"
-            )
+        n = len(self.param_dims)
+        if not isinstance(action, tuple | list) or len(action) != 1 + n:
+            raise ValueError(f"Manager action must be a tuple (choice, {n} parameter blocks), got {action!r}")
         choice = int(action[0])
-        if not 0 <= choice < len(self.param_dims):
-            raise ValueError(f"Manager choice must be in [0, {len(self.param_dims)}), got {choice}")
-        block = self.action_space.spaces[1 + choice]
-        params = np.asarray(action[1 + choice], dtype=np.float64).reshape(-1)
-        if params.shape != block.shape:
-            raise ValueError(f"parameters of {self.names[choice]} must have shape {block.shape}, got {params.shape}")
-        if not np.isfinite(params).all():
-            raise ValueError(f"parameters of {self.names[choice]} contain NaN or inf: {params.tolist()}")
-        params = np.clip(params, block.low, block.high)
-        is_micro = choice == len(self.skills)
-        total, discount, tau = 0.0, 1.0, 0
-        terminated = truncated = False
-        info: dict[str, Any] = {}
-        for _ in range(self.durations[choice]):
-            if is_micro:
-                torques = params
-            else:
-                torques = self.skills[choice].act(self._obs[None, :BASE_OBS_DIM], params[None])[0]
-            self._obs, r, terminated, truncated, info = self.env.step(torques)
-            total += discount * r
-            discount *= self.gamma
-            tau += 1
-            if terminated or truncated:
-                break
-        if is_micro and self.micro is not None:
-            total -= self.micro.penalty
-        info = {**info, "tau": tau, "discount": discount, "macro": self.names[choice]}
-        return self._obs.copy(), total, terminated, truncated, info
+        if not 0 <= choice < n:
+            raise ValueError(f"Manager choice must be in [0, {n}), got {choice}")
+        row = np.zeros(1 + int(self.offsets[-1]))
+        row[0] = choice
+        for j, (d, a) in enumerate(zip(self.param_dims, action[1:], strict=True)):
+            block = np.asarray(a, dtype=np.float64).reshape(-1)
+            if block.shape != (d,):
+                raise ValueError(f"parameters of {self.names[j]} must have shape ({d},), got {block.shape}")
+            row[1 + self.offsets[j] : 1 + self.offsets[j + 1]] = block
+        res = step_macros([self], row[None])
+        info = {**res.infos[0], "tau": int(res.tau[0]), "discount": float(res.discount[0]), "macro": self.names[choice],
+                "task_reward": float(res.task_reward[0])}  # fmt: skip
+        return res.obs[0].copy(), float(res.rewards[0]), bool(res.terminated[0]), bool(res.truncated[0]), info
+
+    def get_state(self) -> dict[str, Any]:
+        """The low-level task's exact state (JSON-serialisable); see :meth:`ArmEnv.get_state`."""
+        return {"env": self.env.get_state(), "obs": self._obs.tolist()}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`get_state`."""
+        self.env.set_state(state["env"])
+        self._obs = np.asarray(state["obs"], dtype=np.float64)
+
+    @staticmethod
+    def step_batch(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
+        """One decision in each of ``envs`` from flat hierarchical actions ``[N, 1 + S]`` (see :func:`step_macros`)."""
+        return step_macros(envs, actions)
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """The low-level task's frame."""
@@ -129,3 +171,100 @@ class MacroEnv(gym.Env):
     def close(self) -> None:
         """Close the low-level task."""
         self.env.close()
+
+
+def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
+    """Run one Manager decision in each of ``N`` environments that share their skills, in lockstep.
+
+    ``actions`` are flat hierarchical actions ``[N, 1 + S]``: the choice, then every parameter block (values
+    in [-1, 1]; clipped). At every low-level step each skill is evaluated once, on ``[M, 24]`` for the ``M``
+    environments running it, and an environment whose macro-action has ended (its duration, or its episode)
+    waits. Raises ValueError for a wrong shape, NaN/inf, or a choice that is not one of the macro-actions.
+    """
+    first = envs[0]
+    n, width = len(envs), 1 + int(first.offsets[-1])
+    a = np.asarray(actions, dtype=np.float64)
+    if a.shape != (n, width):
+        raise ValueError(f"Manager actions must have shape ({n}, {width}) (choice + parameter blocks), got {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError("Manager actions contain NaN or inf")
+    choice = a[:, 0].astype(np.int64)
+    if (choice != a[:, 0]).any() or (choice < 0).any() or (choice >= len(first.names)).any():
+        raise ValueError(f"Manager choices must be integers in [0, {len(first.names)}), got {a[:, 0].tolist()}")
+    params = first._centre + first._half * np.clip(a[:, 1:], -1.0, 1.0)
+    durations = first.durations[choice]
+    obs = np.stack([e._obs for e in envs])
+    rewards, task_reward = np.zeros(n), np.zeros(n)
+    discount, tau = np.ones(n), np.zeros(n, dtype=np.int64)
+    terminated, truncated = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    infos: list[dict[str, Any]] = [{} for _ in range(n)]
+    torques = np.zeros((n, N_JOINTS))
+    active = np.ones(n, dtype=bool)
+    offsets, n_skills = first.offsets, len(first.skills)
+    for j in range(int(durations.max())):
+        active &= durations > j
+        running = np.flatnonzero(active)
+        if running.size == 0:
+            break
+        chosen = choice[running]
+        for s in np.unique(chosen):
+            idx = running[chosen == s]
+            block = params[idx, offsets[s] : offsets[s + 1]]
+            torques[idx] = block if s == n_skills else first.skills[s].act(obs[idx, :BASE_OBS_DIM], block)
+        for i in running:
+            env = envs[i]
+            obs[i], r, term, trunc, infos[i] = env.env.step(torques[i])
+            rewards[i] += discount[i] * r
+            task_reward[i] += r
+            discount[i] *= env.gamma
+            tau[i] += 1
+            if env.on_substep is not None:
+                env.on_substep(env.names[choice[i]])
+            if term or trunc:
+                terminated[i], truncated[i], active[i] = term, trunc and not term, False
+    if first.micro is not None and first.micro.penalty:
+        rewards[choice == n_skills] -= first.micro.penalty
+    for e, o in zip(envs, obs, strict=True):
+        e._obs = o.copy()
+    return MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, infos)
+
+
+@dataclass(frozen=True)
+class MacroSpec:
+    """Which skills a Manager commands, for how long, and its micro-action (a field of the training config)."""
+
+    skills: tuple[str, ...] = ()
+    """Skill names, looked up in ``library``, then in ``$HRLP_SKILLS`` / ``~/.hrlp/skills``, then among the skills
+    shipped with hrlp (``hrlp skills list``)."""
+    k: int | None = None
+    """Low-level steps per skill call (None: each skill's default)."""
+    micro: MicroAction | None = None
+    """The micro-action, or None."""
+    library: str | None = None
+    """A skill library directory searched first."""
+
+    def __post_init__(self) -> None:
+        if not self.skills and self.micro is None:
+            raise ValueError("a Manager needs at least one skill or the micro-action (--micro)")
+        if len(set(self.skills)) != len(self.skills):
+            raise ValueError(f"skills are listed twice: {', '.join(self.skills)}")
+        if self.k is not None and (isinstance(self.k, bool) or not isinstance(self.k, int) or self.k < 1):
+            raise ValueError(f"k must be a positive integer, got {self.k!r}")
+
+    def load_skills(self) -> list[Skill]:
+        """The named skills, frozen (a one-line error names a missing or damaged one)."""
+        from hrlp.skills.library import load_skill
+
+        return [load_skill(name, self.library) for name in self.skills]
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-serialisable form."""
+        from dataclasses import asdict
+
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> MacroSpec:
+        """Inverse of :meth:`to_json`."""
+        micro = d.get("micro")
+        return cls(tuple(d["skills"]), d.get("k"), MicroAction(**micro) if micro else None, d.get("library"))

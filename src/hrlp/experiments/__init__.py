@@ -1,0 +1,1 @@
+"""The paper's experiments as runnable presets, and the demo."""

@@ -1,0 +1,88 @@
+"""Learning curves from runs' ``progress.csv`` files (matplotlib, off-screen)."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+
+def read_progress(run_dir: Path) -> dict[str, np.ndarray]:
+    """A run's ``progress.csv`` as columns of floats (NaN where empty). Raises ValueError if it is missing or empty."""
+    path = Path(run_dir) / "progress.csv"
+    if not path.is_file():
+        raise ValueError(f"{run_dir}: no progress.csv (not a training run?)")
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        raise ValueError(f"{path}: no iterations logged yet")
+    return {k: np.array([float(r[k]) if r[k] not in ("", None) else math.nan for r in rows]) for k in rows[0]}
+
+
+def plot_learning_curves(
+    runs: Mapping[str, Sequence[Path]],
+    out: Path,
+    metrics: Sequence[str] = ("success_rate", "return_mean"),
+    title: str | None = None,
+) -> Path:
+    """Plot ``metrics`` against environment steps, one line per label (the mean over its runs, with min-max band).
+
+    ``runs`` maps a label (e.g. "Manager" or "flat") to the run directories of its seeds. The figure is written
+    atomically to ``out`` (.png, .pdf or .svg); returns ``out``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise ValueError(f"plot file must end in .png, .pdf or .svg, got {out.name!r}")
+    data = {label: [read_progress(r) for r in dirs] for label, dirs in runs.items()}
+    fig, axes = plt.subplots(1, len(metrics), figsize=(5 * len(metrics), 3.6), squeeze=False)
+    for ax, metric in zip(axes[0], metrics, strict=True):
+        for label, logs in data.items():
+            logs = [lg for lg in logs if metric in lg]
+            if not logs:
+                continue
+            grid = np.linspace(0, min(lg["env_steps"][-1] for lg in logs), 100)
+            ys = np.stack([np.interp(grid, lg["env_steps"], _fill(lg[metric])) for lg in logs])
+            (line,) = ax.plot(grid, ys.mean(0), label=f"{label} ({len(logs)} run{'s' * (len(logs) > 1)})")
+            if len(logs) > 1:
+                ax.fill_between(grid, ys.min(0), ys.max(0), color=line.get_color(), alpha=0.2)
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel(metric.replace("_", " "))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=out.suffix, dir=out.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=120)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
+    return out
+
+
+def _fill(y: np.ndarray) -> np.ndarray:
+    """Carry the last finite value over NaNs (iterations where no episode ended); leading NaNs become 0."""
+    out = y.copy()
+    last = 0.0
+    for i, v in enumerate(out):
+        if math.isnan(v):
+            out[i] = last
+        else:
+            last = v
+    return out
