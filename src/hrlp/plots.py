@@ -39,6 +39,7 @@ def plot_learning_curves(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import EngFormatter
 
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):
         raise ValueError(f"plot file must end in .png, .pdf or .svg, got {out.name!r}")
@@ -55,6 +56,7 @@ def plot_learning_curves(
             if len(logs) > 1:
                 ax.fill_between(grid, ys.min(0), ys.max(0), color=line.get_color(), alpha=0.2)
         ax.set_xlabel("environment steps")
+        ax.xaxis.set_major_formatter(EngFormatter())
         ax.set_ylabel(metric.replace("_", " "))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)

@@ -201,3 +201,24 @@ def test_gripper_grid_values_of_the_paper_are_accepted():
         for tr in (0.03, 0.06):
             assert make("Gripper", c2=c2, tr=tr).task.reward == GripReward(c2=c2, tr=tr)
     assert make("ReachAndGrip2", tr=0.08, c1=-1, c2=2.1, c3=-4).task.reward.c2 == 2.1
+
+
+def test_gripper_close_starts_open_the_fingers_around_the_capsule():
+    env = make("Gripper", start_distance=[0.0, 0.03], finger_opening=[0.8, 1.0])
+    for seed in range(5):
+        env.reset(seed=seed)
+        p = env.physics
+        assert p.hand_to_capsule() <= 0.03 + 0.01  # IK tolerance
+        assert 0.8 <= -p.data.qpos[7] <= 1.0 and p.data.qpos[7] == pytest.approx(-p.data.qpos[8])
+        assert p.finger_gap() > 0.05 and p.arm_contacts() == 0  # the capsule (5 cm) fits between the tips
+    default = make("Gripper")
+    default.reset(seed=0)
+    assert 0.05 - 0.01 <= default.physics.hand_to_capsule() <= 0.09 + 0.01 and default.physics.data.qpos[7] == 0
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"start_distance": (0.1, 0.05)}, {"finger_opening": (0.0, 2.0)}, {"start_distance": (0.0,)}]
+)
+def test_gripper_start_ranges_are_checked(kwargs):
+    with pytest.raises(ValueError, match="must be a range"):
+        make("Gripper", **kwargs)

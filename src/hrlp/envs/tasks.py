@@ -126,18 +126,22 @@ def arm_with_hand_at(
     *,
     tol: float = 0.01,
     tries: int = 40,
+    fingers: float | Callable[[], float] = 0.0,
 ) -> np.ndarray:
     """Put H at ``goal`` (within ``tol``) by inverse kinematics from random joint angles, arm clear of contacts.
 
     ``goal`` may be a callable that draws a new goal for each try (a start region rather than a
-    point). Returns the goal reached. Raises :class:`StartError` if no try succeeds.
+    point); so may ``fingers``, the opening of each finger in radians (0: the model's rest, tips
+    4 cm apart; about 0.8 lets the capsule between them). Returns the goal reached. Raises
+    :class:`StartError` if no try succeeds.
     """
     lo, hi = physics.joint_range[:, 0], physics.joint_range[:, 1]
     best = np.inf
     for _ in range(tries):
         g = goal() if callable(goal) else goal
+        opening = float(fingers() if callable(fingers) else fingers)
         q0 = rng.uniform(lo, hi)
-        q0[7:] = 0.0
+        q0[7:] = (-opening, opening)  # rc_close < 0 and lc_close > 0 open the claw
         q, err = physics.solve_hand_ik(g, q0, tol=tol / 2)
         best = min(best, err)
         if err > tol:
@@ -310,8 +314,12 @@ class GripperTask(Task):
     """Gripper (Section 4.1, Experiment 1): grip the capsule with the palm starting close to it.
 
     Start: the capsule lies on the circle at a random angle in [-angle_range, angle_range]; H
-    starts at a random point 5-9 cm from the capsule's centre in the upper half-space, fingers
-    open, the claw clear of the capsule (closer starts put a finger inside the capsule).
+    starts at a random point ``start_distance`` (default 5-9 cm) from the capsule's centre in the
+    upper half-space, each finger opened by a random angle in ``finger_opening`` (default 0: at
+    rest, tips 4 cm apart), the claw clear of the capsule. The capsule (5 cm across) only fits
+    between fingers opened by about 0.8 rad, so starts closer than 5 cm need an opening; the
+    shipped Gripper skill trains on ``start_distance=(0, 0.09)``, ``finger_opening=(0, 1)``: the
+    paper's "many close positions" (Section 4.1).
     Reward: :class:`GripReward`. Success: :class:`SparseSuccess` (Definition 1).
     """
 
@@ -321,14 +329,28 @@ class GripperTask(Task):
     """Definition 1 thresholds."""
     angle_range: float = math.pi
     """Half-width of the capsule's start angle, radians (pi: the full circle)."""
+    start_distance: tuple[float, float] = (0.05, 0.09)
+    """Range of the start distance d(H, C), metres."""
+    finger_opening: tuple[float, float] = (0.0, 0.0)
+    """Range of each finger's start opening, radians (at most 1.05, the joint limit)."""
 
     def __post_init__(self) -> None:
         _nonneg(self, "angle_range")
+        for name, top in (("start_distance", 0.3), ("finger_opening", 1.05)):
+            v = tuple(getattr(self, name))
+            if (
+                len(v) != 2
+                or not all(isinstance(x, int | float) and math.isfinite(x) for x in v)
+                or not 0 <= v[0] <= v[1] <= top
+            ):
+                raise ValueError(f"GripperTask.{name} must be a range (low, high) with 0 <= low <= high <= {top}, got {v!r}")
+            object.__setattr__(self, name, (float(v[0]), float(v[1])))
 
     def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
         _hide_target(physics)
         c = _place_capsule(physics, _angle(rng, self.angle_range))
-        arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, 0.05, 0.09))
+        (d0, d1), (f0, f1) = self.start_distance, self.finger_opening
+        arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, d0, d1), fingers=lambda: rng.uniform(f0, f1), tries=200)
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
         return self.reward.terms(physics)

@@ -40,9 +40,10 @@ def demo_config(steps: int = 1_500_000, seed: int = 0) -> TrainConfig:
     )
 
 
-def run_demo(out_dir: Path, steps: int = 1_500_000, seed: int = 0, episodes: int = 100,
+def run_demo(out_dir: Path, steps: int = 1_500_000, seed: int = 0, episodes: int = 100, video_steps: int = 0,
              console: Console | None = None) -> DemoResult:  # fmt: skip
-    """Train (or continue) the demo Manager in ``out_dir``, evaluate it, write ``demo.mp4`` and ``learning_curve.png``."""
+    """Train (or continue) the demo Manager in ``out_dir``, evaluate it, write ``demo.mp4`` (``video_steps``
+    low-level steps, 0 for one episode) and ``learning_curve.png``."""
     import dataclasses
     import math
 
@@ -72,7 +73,7 @@ def run_demo(out_dir: Path, steps: int = 1_500_000, seed: int = 0, episodes: int
             progress.update(bar, completed=min(st["env_steps"], cfg.steps), status=status)
     ev = evaluate_run(out_dir, episodes=episodes)
     video = out_dir / "demo.mp4"
-    frames, fps, _ = rollout_frames(out_dir, steps=0, seed=seed, console=console)
+    frames, fps, _ = rollout_frames(out_dir, steps=video_steps, seed=seed, console=console)
     write_video(video, frames, fps)
     plot = plot_learning_curves({"Manager (gripper + reacher)": [out_dir]}, out_dir / "learning_curve.png",
                                 title="reach-and-grip, Experiment 2")  # fmt: skip

@@ -1,0 +1,37 @@
+"""Learning-curve plots and the demo (real training, video and plot at a tiny budget)."""
+
+import pytest
+from typer.testing import CliRunner
+
+from hrlp.cli import app
+from hrlp.plots import plot_learning_curves, read_progress
+from hrlp.train import TrainConfig, train
+
+
+def test_learning_curves_of_several_seeds(tmp_path):
+    runs = []
+    for seed in (0, 1):
+        list(train(TrainConfig(task="Reacher", steps=200, batch_steps=100, num_envs=2, episode_steps=20, seed=seed),
+                   tmp_path / f"s{seed}"))  # fmt: skip
+        runs.append(tmp_path / f"s{seed}")
+    log = read_progress(runs[0])
+    assert list(log["env_steps"]) == [100, 200]
+    out = plot_learning_curves({"Reacher": runs}, tmp_path / "plots" / "curve.png")
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(ValueError, match="must end in"):
+        plot_learning_curves({"Reacher": runs}, tmp_path / "curve.txt")
+    with pytest.raises(ValueError, match="no progress.csv"):
+        read_progress(tmp_path / "nowhere")
+
+
+def test_demo_trains_evaluates_and_writes_video_and_plot(tmp_path):
+    out = tmp_path / "demo"
+    r = CliRunner().invoke(app, ["demo", "--out-dir", str(out), "--steps", "100", "--episodes", "2", "--video-steps", "30"])
+    assert r.exit_code == 0, r.output
+    assert "success rate:" in r.output
+    assert (out / "demo.mp4").stat().st_size > 1_000 and (out / "learning_curve.png").exists()
+    assert read_progress(out)["env_steps"][-1] >= 100
+    # Running it again continues the same run instead of failing or starting over.
+    r = CliRunner().invoke(app, ["demo", "--out-dir", str(out), "--steps", "100", "--episodes", "1", "--video-steps", "5"])
+    assert r.exit_code == 0, r.output
+    assert len(read_progress(out)["env_steps"]) == 1
