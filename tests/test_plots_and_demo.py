@@ -20,7 +20,7 @@ def test_learning_curves_of_several_seeds(tmp_path):
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(ValueError, match="must end in"):
         plot_learning_curves({"Reacher": runs}, tmp_path / "curve.txt")
-    with pytest.raises(ValueError, match="no progress.csv"):
+    with pytest.raises(ValueError, match=r"no progress\.csv"):
         read_progress(tmp_path / "nowhere")
 
 
