@@ -116,6 +116,7 @@ _TASK_ARG = Annotated[
     list[str] | None,
     typer.Option("--task-arg", help="A task argument NAME=VALUE, repeatable, e.g. --task-arg c1=-10 --task-arg tr=0.06."),
 ]
+_INIT_LOG_STD = Annotated[float, typer.Option(help="Initial log std of the Gaussian action noise.")]
 _RESUME = Annotated[
     bool, typer.Option(help="Continue the run in --run-dir from its last checkpoint with its own settings (--steps may grow).")
 ]
@@ -133,10 +134,13 @@ def train(
     gamma: _GAMMA = 0.99,
     episode_steps: _EPISODE_STEPS = None,
     task_arg: _TASK_ARG = None,
+    init_log_std: _INIT_LOG_STD = 0.0,
     resume: _RESUME = False,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
-    _train(task, None, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, resume)
+    _train(
+        task, None, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, init_log_std, resume
+    )
 
 
 @app.command("train-manager")
@@ -160,6 +164,7 @@ def train_manager(
     gamma: _GAMMA = 0.99,
     episode_steps: _EPISODE_STEPS = None,
     task_arg: _TASK_ARG = None,
+    init_log_std: _INIT_LOG_STD = 0.0,
     resume: _RESUME = False,
 ) -> None:
     """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration."""
@@ -171,7 +176,9 @@ def train_manager(
         spec = MacroSpec(names, k, m, None if library is None else str(library))
     except ValueError as e:
         raise _fail(str(e)) from None
-    _train(task, spec, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, resume)
+    _train(
+        task, spec, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, init_log_std, resume
+    )
 
 
 def parse_task_args(items: list[str] | None) -> dict[str, Any]:
@@ -190,7 +197,9 @@ def parse_task_args(items: list[str] | None) -> dict[str, Any]:
     return out
 
 
-def _train(task, macro, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, resume) -> Path:
+def _train(
+    task, macro, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, init_log_std, resume
+) -> Path:
     """Shared body of ``train`` and ``train-manager``: build and check the config, then train with a progress bar."""
     import dataclasses
     import math
@@ -219,7 +228,7 @@ def _train(task, macro, steps, seed, run_dir, batch_steps, num_envs, max_kl, gam
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
             cfg = TrainConfig(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
                               episode_steps=episode_steps, trpo=dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma),
-                              macro=macro, task_kwargs=parse_task_args(task_arg))  # fmt: skip
+                              macro=macro, task_kwargs=parse_task_args(task_arg), init_log_std=init_log_std)  # fmt: skip
         env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None

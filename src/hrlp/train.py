@@ -50,6 +50,8 @@ class TrainConfig:
     """Episode length for hrlp tasks (None: the task's default, 300)."""
     hidden: tuple[int, ...] = (64, 64)
     """Hidden layer widths of the policy and value networks."""
+    init_log_std: float = 0.0
+    """Initial log standard deviation of the policy's Gaussian action noise (0: std 1 on [-1, 1] torques)."""
     trpo: TRPOConfig = field(default_factory=TRPOConfig)
     """TRPO settings (max KL 0.01, gamma 0.99, ...)."""
     value: ValueFitConfig = field(default_factory=ValueFitConfig)
@@ -70,6 +72,8 @@ class TrainConfig:
             raise ValueError(f"episode_steps must be a positive integer, got {self.episode_steps!r}")
         if not self.hidden or any(h <= 0 for h in self.hidden):
             raise ValueError(f"hidden must be positive layer widths, got {self.hidden!r}")
+        if not (isinstance(self.init_log_std, int | float) and math.isfinite(self.init_log_std)):
+            raise ValueError(f"init_log_std must be a finite number, got {self.init_log_std!r}")
         if not isinstance(self.task_kwargs, dict) or not all(isinstance(k, str) for k in self.task_kwargs):
             raise ValueError(f"task_kwargs must map argument names to values, got {self.task_kwargs!r}")
 
@@ -135,7 +139,7 @@ class Trainer:
         probe = factory()
         obs_dim = int(np.prod(probe.observation_space.shape))
         self.skill_hashes = {s.name: s.content_hash for s in probe.skills} if isinstance(probe, MacroEnv) else {}
-        self.policy = policy_for_space(obs_dim, probe.action_space, cfg.hidden)
+        self.policy = policy_for_space(obs_dim, probe.action_space, cfg.hidden, cfg.init_log_std)
         self.obs_dim = obs_dim
         probe.close()
         self.value_net = ValueNet(obs_dim, cfg.hidden)

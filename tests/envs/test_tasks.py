@@ -222,3 +222,16 @@ def test_gripper_close_starts_open_the_fingers_around_the_capsule():
 def test_gripper_start_ranges_are_checked(kwargs):
     with pytest.raises(ValueError, match="must be a range"):
         make("Gripper", **kwargs)
+
+
+def test_optional_gripped_term_pays_only_while_definition_1_holds():
+    plain = make("Gripper")
+    plain.reset(seed=0)
+    assert "reward_gripped" not in plain.step(np.zeros(9))[4]  # the paper's three terms by default
+    env = make("Gripper", c4=5.0, tr1=10.0, tr2=10.0)  # thresholds so loose that Definition 1 always holds
+    env.reset(seed=0)
+    _, r, _, _, info = env.step(np.zeros(9))
+    assert info["reward_gripped"] == 5.0
+    assert r == pytest.approx(sum(v for k, v in info.items() if k.startswith("reward_")))
+    with pytest.raises(ValueError, match="c4"):
+        make("Gripper", c4=-1.0)

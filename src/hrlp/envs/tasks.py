@@ -279,6 +279,8 @@ class GripReward:
 
     Requires c1, c3 < 0 < c2 and tr > 0. Defaults are the best cell of the paper's grid
     (Figure 6: c2 = 3, tr = 0.03) with the flat runs' c1 = -1 and c3 = -4 (Section 4.3.2).
+    An optional fourth term, ``c4 1[Definition 1 holds now]`` (c4 >= 0, default 0: the paper's
+    reward), pays for the gripped state itself; the shipped Gripper skill trains with it.
     """
 
     c1: float = -1.0
@@ -289,15 +291,18 @@ class GripReward:
     """Weight of d(FT1, FT2) (negative: closing the claw is rewarded)."""
     tr: float = 0.03
     """Distance threshold of the bonus, metres."""
+    c4: float = 0.0
+    """Bonus while the sparse-success condition holds (0: the paper's three-term reward)."""
 
     def __post_init__(self) -> None:
-        for n in ("c1", "c2", "c3", "tr"):
+        for n in ("c1", "c2", "c3", "tr", "c4"):
             v = getattr(self, n)
             if not (isinstance(v, int | float) and math.isfinite(v)):
                 raise ValueError(f"grip reward {n} must be a finite number, got {v!r}")
         if not (self.c1 < 0 and self.c3 < 0 < self.c2):
             raise ValueError(f"grip reward needs c1, c3 < 0 < c2, got c1={self.c1}, c2={self.c2}, c3={self.c3}")
         _positive(self, "tr")
+        _nonneg(self, "c4")
 
     def terms(self, physics: ArmPhysics) -> dict[str, float]:
         """The three terms for the current state."""
@@ -307,6 +312,13 @@ class GripReward:
             "bonus": self.c2 if d < self.tr else 0.0,
             "fingers": self.c3 * physics.finger_gap(),
         }
+
+
+def _grip_terms(reward: GripReward, sparse: SparseSuccess, physics: ArmPhysics) -> dict[str, float]:
+    terms = reward.terms(physics)
+    if reward.c4:
+        terms["gripped"] = reward.c4 if sparse(physics) else 0.0
+    return terms
 
 
 @dataclass(frozen=True)
@@ -353,7 +365,7 @@ class GripperTask(Task):
         arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, d0, d1), fingers=lambda: rng.uniform(f0, f1), tries=200)
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
-        return self.reward.terms(physics)
+        return _grip_terms(self.reward, self.sparse, physics)
 
     def success(self, physics: ArmPhysics) -> bool:
         return self.sparse(physics)
@@ -402,7 +414,7 @@ class ReachAndGripTask(Task):
         arm_with_hand_at(physics, rng, circle_point(_angle(rng, w), z=PALM_CIRCLE_Z))
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
-        return self.reward.terms(physics)
+        return _grip_terms(self.reward, self.sparse, physics)
 
     def success(self, physics: ArmPhysics) -> bool:
         return self.sparse(physics)

@@ -157,17 +157,17 @@ class HierarchicalPolicy(Policy):
         return flat_to_tuples(self.act_numpy(np.atleast_2d(obs), generator, deterministic), self.param_dims)
 
 
-def policy_for_space(obs_dim: int, space: gym.Space, hidden: Sequence[int] = (64, 64)) -> Policy:
+def policy_for_space(obs_dim: int, space: gym.Space, hidden: Sequence[int] = (64, 64), init_log_std: float = 0.0) -> Policy:
     """The policy for an action space: Box -> Gaussian, Discrete -> categorical, ``Tuple(Discrete(n), Box(d_1), ...,
     Box(d_n))`` -> hierarchical (the Manager). Raises ValueError for any other space."""
     from hrlp.rollout import parameterised_dims
 
     if isinstance(space, gym.spaces.Box):
-        return GaussianPolicy(obs_dim, int(np.prod(space.shape)), hidden)
+        return GaussianPolicy(obs_dim, int(np.prod(space.shape)), hidden, init_log_std=init_log_std)
     if isinstance(space, gym.spaces.Discrete):
         return CategoricalPolicy(obs_dim, int(space.n), hidden)
     dims = parameterised_dims(space)
-    return HierarchicalPolicy(obs_dim, len(dims), dims, hidden)
+    return HierarchicalPolicy(obs_dim, len(dims), dims, hidden, init_log_std=init_log_std)
 
 
 class ValueNet(nn.Module):
