@@ -411,7 +411,8 @@ class ReachAndGripTask(Task):
         _hide_target(physics)
         w = self.angle_half_width(episode)
         _place_capsule(physics, _angle(rng, w) if self.experiment == 2 else 0.0)
-        arm_with_hand_at(physics, rng, circle_point(_angle(rng, w), z=PALM_CIRCLE_Z))
+        # A palm angle next to the capsule's can leave no contact-free pose; such angles are redrawn.
+        arm_with_hand_at(physics, rng, lambda: circle_point(_angle(rng, w), z=PALM_CIRCLE_Z))
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
         return _grip_terms(self.reward, self.sparse, physics)
