@@ -116,6 +116,7 @@ _TASK_ARG = Annotated[
     list[str] | None,
     typer.Option("--task-arg", help="A task argument NAME=VALUE, repeatable, e.g. --task-arg c1=-10 --task-arg tr=0.06."),
 ]
+_WORKERS = Annotated[int, typer.Option(help="Processes sampling at the same time (e.g. one per core); 1: in this process.")]
 _INIT_LOG_STD = Annotated[float, typer.Option(help="Initial log std of the Gaussian action noise.")]
 _RESUME = Annotated[
     bool, typer.Option(help="Continue the run in --run-dir from its last checkpoint with its own settings (--steps may grow).")
@@ -135,12 +136,13 @@ def train(
     episode_steps: _EPISODE_STEPS = None,
     task_arg: _TASK_ARG = None,
     init_log_std: _INIT_LOG_STD = 0.0,
+    workers: _WORKERS = 1,
     resume: _RESUME = False,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
-    _train(
-        task, None, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, init_log_std, resume
-    )
+    settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
+                    episode_steps=episode_steps, init_log_std=init_log_std, workers=workers)  # fmt: skip
+    _train(settings, task_arg, max_kl, gamma, run_dir, resume, steps)
 
 
 @app.command("train-manager")
@@ -165,6 +167,7 @@ def train_manager(
     episode_steps: _EPISODE_STEPS = None,
     task_arg: _TASK_ARG = None,
     init_log_std: _INIT_LOG_STD = 0.0,
+    workers: _WORKERS = 1,
     resume: _RESUME = False,
 ) -> None:
     """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration."""
@@ -176,9 +179,9 @@ def train_manager(
         spec = MacroSpec(names, k, m, None if library is None else str(library))
     except ValueError as e:
         raise _fail(str(e)) from None
-    _train(
-        task, spec, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, init_log_std, resume
-    )
+    settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
+                    episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec)  # fmt: skip
+    _train(settings, task_arg, max_kl, gamma, run_dir, resume, steps)
 
 
 def parse_task_args(items: list[str] | None) -> dict[str, Any]:
@@ -197,9 +200,8 @@ def parse_task_args(items: list[str] | None) -> dict[str, Any]:
     return out
 
 
-def _train(
-    task, macro, steps, seed, run_dir, batch_steps, num_envs, max_kl, gamma, episode_steps, task_arg, init_log_std, resume
-) -> Path:
+def _train(settings: dict[str, Any], task_arg: list[str] | None, max_kl: float, gamma: float, run_dir: Path | None,
+           resume: bool, steps: int | None) -> Path:  # fmt: skip
     """Shared body of ``train`` and ``train-manager``: build and check the config, then train with a progress bar."""
     import dataclasses
     import math
@@ -211,7 +213,8 @@ def _train(
     from hrlp.train import TrainConfig, env_factory
     from hrlp.train import train as run_training
 
-    out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{seed}"
+    task = settings["task"]
+    out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{settings['seed']}"
     try:
         if resume:
             from hrlp.checkpoint import load_checkpoint
@@ -226,9 +229,8 @@ def _train(
         else:
             if (out / "checkpoint").exists():
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
-            cfg = TrainConfig(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
-                              episode_steps=episode_steps, trpo=dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma),
-                              macro=macro, task_kwargs=parse_task_args(task_arg), init_log_std=init_log_std)  # fmt: skip
+            trpo = dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma)
+            cfg = TrainConfig(**settings, trpo=trpo, task_kwargs=parse_task_args(task_arg))
         env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None

@@ -8,10 +8,12 @@ training run can report where its wall time goes.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -96,6 +98,7 @@ class Sampler:
         self._ret = np.zeros(n)
         self._len = np.zeros(n, dtype=np.int64)
         self.timing = Timing()
+        self.last_raw_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations of the last batch
 
     @property
     def num_envs(self) -> int:
@@ -156,6 +159,7 @@ class Sampler:
             self.timing.inference += t1 - t0
             self.timing.env += t2 - t1
         assert actions_buf is not None
+        self.last_raw_obs = raw_buf
         if not self.normalizer.frozen:
             self.normalizer.update(raw_buf.reshape(-1, dim))
         f32 = torch.float32
@@ -214,6 +218,148 @@ class Sampler:
         """Close every environment."""
         for env in self.envs:
             env.close()
+
+
+class ParallelSampler:
+    """A :class:`Sampler` whose environments are split over ``workers`` processes that sample at the same time.
+
+    Each worker steps its share of the environments with its own copy of the policy (batched inference over its
+    share), receives the current weights and normaliser statistics before every batch, and returns its part of
+    the batch, which is joined along the environment axis in environment order; the normaliser is then updated
+    in this process with every raw observation, as :class:`Sampler` does. Worker ``w`` seeds its environments
+    like :class:`Sampler` would (``seed + i`` for environment ``i``) and its action noise with ``seed + 7919 w``,
+    so a run is reproducible for a given number of workers, and :meth:`get_state`/:meth:`set_state` make it
+    exactly resumable. Environment constructors must be picklable (``hrlp.train.env_factory``'s are).
+    """
+
+    generator = None  # the action-noise generators live in the workers (their states are in get_state())
+
+    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], policy: Policy, normalizer: RunningNormalizer,
+                 seed: int = 0, workers: int = 2) -> None:  # fmt: skip
+        import multiprocessing as mp
+
+        if workers < 2 or workers > len(env_fns):
+            raise ValueError(f"ParallelSampler needs 2 <= workers <= environments ({len(env_fns)}), got {workers}")
+        self.policy, self.normalizer = policy, normalizer
+        self.timing = Timing()
+        self.last_raw_obs: np.ndarray | None = None
+        bounds = np.linspace(0, len(env_fns), workers + 1).astype(int)
+        ctx = mp.get_context("spawn")  # no fork: torch and MuJoCo state must not be shared with children
+        self._conns = []
+        self._procs = []
+        for w in range(workers):
+            parent, child = ctx.Pipe()
+            chunk = list(env_fns[bounds[w] : bounds[w + 1]])
+            args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w)
+            proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
+            proc.start()
+            child.close()
+            self._conns.append(parent)
+            self._procs.append(proc)
+        for conn in self._conns:
+            _receive(conn)  # each worker reports ready (or the error that stopped it)
+        self.num_envs = len(env_fns)
+
+    def collect(self, steps_per_env: int) -> tuple[Batch, list[Episode]]:
+        """Every worker samples ``steps_per_env`` steps of its environments at once; returns the joined batch."""
+        weights = {k: v.detach().cpu().numpy() for k, v in self.policy.state_dict().items()}
+        stats = {k: v.numpy() for k, v in self.normalizer.state_dict().items()}
+        for conn in self._conns:
+            conn.send(("collect", (weights, stats, steps_per_env)))
+        parts = [_receive(conn) for conn in self._conns]
+        fields = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated")
+        joined = {f: torch.cat([p["batch"][f] for p in parts], dim=1) for f in fields}
+        discounts = [p["batch"]["discount"] for p in parts]
+        raw = np.concatenate([p["raw"] for p in parts], axis=1)
+        self.last_raw_obs = raw
+        if not self.normalizer.frozen:
+            self.normalizer.update(raw.reshape(-1, raw.shape[-1]))
+        self.timing.env += max(p["env"] for p in parts)
+        self.timing.inference += max(p["inference"] for p in parts)
+        batch = Batch(**joined, discount=None if discounts[0] is None else torch.cat(discounts, dim=1),
+                      env_steps=sum(p["batch"]["env_steps"] for p in parts))  # fmt: skip
+        return batch, [e for p in parts for e in p["episodes"]]
+
+    def get_state(self) -> dict:
+        """Each worker's sampler state and action-noise generator state (JSON)."""
+        for conn in self._conns:
+            conn.send(("get_state", None))
+        return {"workers": [_receive(conn) for conn in self._conns]}
+
+    def set_state(self, state: dict) -> None:
+        """Restore :meth:`get_state` (the number of workers must match)."""
+        if len(state.get("workers", [])) != len(self._conns):
+            raise ValueError(f"saved sampler state has {len(state.get('workers', []))} workers, this run {len(self._conns)}")
+        for conn, part in zip(self._conns, state["workers"], strict=True):
+            conn.send(("set_state", part))
+        for conn in self._conns:
+            _receive(conn)
+
+    def close(self) -> None:
+        """Stop the workers (closing their environments)."""
+        for conn in self._conns:
+            try:
+                conn.send(("close", None))
+            except (BrokenPipeError, OSError):
+                pass
+        for proc in self._procs:
+            proc.join(timeout=10)
+            if proc.is_alive():
+                proc.kill()
+
+
+def _receive(conn: Any) -> Any:
+    """A worker's reply; a worker's exception is raised here with its message."""
+    try:
+        kind, payload = conn.recv()
+    except EOFError:
+        raise RuntimeError("a sampler worker process died") from None
+    if kind == "error":
+        raise RuntimeError(f"sampler worker failed: {payload}")
+    return payload
+
+
+def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict, env_seed: int, noise_seed: int) -> None:
+    """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests."""
+    torch.set_num_threads(1)
+    try:
+        normalizer = RunningNormalizer.from_config({**norm_config, "frozen": True})
+        sampler = Sampler(env_fns, policy, normalizer, seed=env_seed)
+        sampler.generator.manual_seed(noise_seed)
+        conn.send(("ok", None))
+    except Exception as e:  # reported to the parent, which raises it
+        conn.send(("error", f"{type(e).__name__}: {e}"))
+        return
+    while True:
+        cmd, arg = conn.recv()
+        try:
+            if cmd == "close":
+                sampler.close()
+                return
+            if cmd == "collect":
+                weights, stats, steps = arg
+                policy.load_state_dict({k: torch.from_numpy(v) for k, v in weights.items()})
+                normalizer.load_state_dict(stats)
+                env0, inf0 = sampler.timing.env, sampler.timing.inference
+                batch, episodes = sampler.collect(steps)
+                reply = {
+                    "batch": {**{f.name: getattr(batch, f.name) for f in dataclasses.fields(batch)}},
+                    "episodes": episodes,
+                    "raw": sampler.last_raw_obs,
+                    "env": sampler.timing.env - env0,
+                    "inference": sampler.timing.inference - inf0,
+                }
+            elif cmd == "get_state":
+                reply = {"sampler": sampler.get_state(), "generator": sampler.generator.get_state().tolist()}
+            elif cmd == "set_state":
+                sampler.set_state(arg["sampler"])
+                sampler.generator.set_state(torch.tensor(arg["generator"], dtype=torch.uint8))
+                reply = None
+            else:
+                raise ValueError(f"unknown command {cmd!r}")
+            conn.send(("ok", reply))
+        except Exception as e:  # reported to the parent, which raises it
+            conn.send(("error", f"{type(e).__name__}: {e}"))
 
 
 def action_decoder(space: gym.Space) -> Callable[[np.ndarray], Sequence]:

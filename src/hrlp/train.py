@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import json
 import math
 import time
@@ -28,7 +29,7 @@ from hrlp.algos.value import ValueFitConfig, fit_value
 from hrlp.checkpoint import load_checkpoint, load_module, module_tensors, pack_generators, save_checkpoint, unpack_generators
 from hrlp.policies.mlp import GaussianPolicy, Policy, ValueNet, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.rollout import Sampler, action_decoder, mean_or_nan
+from hrlp.rollout import ParallelSampler, Sampler, action_decoder, mean_or_nan
 from hrlp.skills.macro_env import MacroEnv, MacroSpec
 
 
@@ -44,6 +45,8 @@ class TrainConfig:
     """Decisions per TRPO iteration (the paper: 50,000 for flat runs, 5,000 for Managers)."""
     num_envs: int = 16
     """Environments stepped together with batched inference."""
+    workers: int = 1
+    """Processes that sample at the same time, each stepping its share of the environments (1: in this process)."""
     seed: int = 0
     """Seed of the environments, the network initialisation and the action noise."""
     episode_steps: int | None = None
@@ -62,10 +65,12 @@ class TrainConfig:
     """Arguments of the task, e.g. ``{"c1": -10.0}`` (Gripper reward constants) or ``{"curriculum_alpha": 1e-4}``."""
 
     def __post_init__(self) -> None:
-        for name in ("steps", "batch_steps", "num_envs"):
+        for name in ("steps", "batch_steps", "num_envs", "workers"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if self.workers > self.num_envs:
+            raise ValueError(f"workers ({self.workers}) must be at most num_envs ({self.num_envs})")
         if self.batch_steps < self.num_envs:
             raise ValueError(f"batch_steps ({self.batch_steps}) must be at least num_envs ({self.num_envs})")
         if self.episode_steps is not None and (not isinstance(self.episode_steps, int) or self.episode_steps <= 0):
@@ -102,7 +107,8 @@ def env_factory(
 ) -> Callable[[], gym.Env]:
     """A constructor for ``task`` (an hrlp task name/id or a Gymnasium id), wrapped in a :class:`MacroEnv` of
     ``macro``'s skills (loaded once, shared, frozen) for a Manager. Raises ValueError for an unknown task, a
-    missing skill, or an unsupported action space, before any compute."""
+    missing skill, or an unsupported action space, before any compute. The constructor can be pickled (sampler
+    worker processes rebuild it; a Manager's skills are then loaded again there, from the same files)."""
     from hrlp.envs import TASKS, make
 
     name = task.removeprefix("hrlp/").removesuffix("-v0")
@@ -112,9 +118,8 @@ def env_factory(
             kw["episode_steps"] = episode_steps
         make(name, **kw).close()  # validate arguments now, before any compute
         if macro is None:
-            return lambda: make(name, **kw)
-        skills = macro.load_skills()
-        return lambda: MacroEnv(make(name, **kw), skills, macro.k, macro.micro, gamma)
+            return functools.partial(make, name, **kw)
+        return _MacroFactory(name, kw, macro, gamma, macro.load_skills())
     if macro is not None:
         raise ValueError(f"{task}: a Manager commands arm skills, so its task must be an hrlp task (see 'hrlp tasks')")
     if task not in gym.registry:
@@ -126,7 +131,24 @@ def env_factory(
         action_decoder(space)
     except ValueError as e:
         raise ValueError(f"{task}: {e}") from None
-    return lambda: gym.make(task, **kwargs)
+    return functools.partial(gym.make, task, **kwargs)
+
+
+class _MacroFactory:
+    """Builds a Manager's environment; its skills are loaded once per process (not pickled: reloaded from disk)."""
+
+    def __init__(self, name: str, kwargs: dict[str, Any], macro: MacroSpec, gamma: float, skills: list | None = None) -> None:
+        self.name, self.kwargs, self.macro, self.gamma, self._skills = name, kwargs, macro, gamma, skills
+
+    def __call__(self) -> MacroEnv:
+        from hrlp.envs import make
+
+        if self._skills is None:
+            self._skills = self.macro.load_skills()
+        return MacroEnv(make(self.name, **self.kwargs), self._skills, self.macro.k, self.macro.micro, self.gamma)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_skills": None}
 
 
 class Trainer:
@@ -144,7 +166,12 @@ class Trainer:
         probe.close()
         self.value_net = ValueNet(obs_dim, cfg.hidden)
         self.normalizer = RunningNormalizer(obs_dim)
-        self.sampler = Sampler([factory] * cfg.num_envs, self.policy, self.normalizer, seed=cfg.seed)
+        envs = [factory] * cfg.num_envs
+        self.sampler: Sampler | ParallelSampler
+        if cfg.workers > 1:
+            self.sampler = ParallelSampler(envs, self.policy, self.normalizer, seed=cfg.seed, workers=cfg.workers)
+        else:
+            self.sampler = Sampler(envs, self.policy, self.normalizer, seed=cfg.seed)
         self.iteration = 0
         self.env_steps = 0
 
@@ -200,7 +227,7 @@ class Trainer:
         """Tensors and JSON metadata of the whole training state."""
         tensors = {**module_tensors("policy", self.policy), **module_tensors("value", self.value_net)}
         tensors.update({f"normalizer.{k}": v for k, v in self.normalizer.state_dict().items()})
-        rng_tensors, rng_meta = pack_generators({}, {"actions": self.sampler.generator})
+        rng_tensors, rng_meta = pack_generators({}, self._generators())
         tensors.update(rng_tensors)
         meta = {
             **rng_meta,
@@ -231,10 +258,15 @@ class Trainer:
         load_module("value", trainer.value_net, tensors)
         trainer.normalizer.load_state_dict({k.removeprefix("normalizer."): v for k, v in tensors.items()
                                             if k.startswith("normalizer.")})  # fmt: skip
-        unpack_generators(tensors, meta, {}, {"actions": trainer.sampler.generator})
+        unpack_generators(tensors, meta, {}, trainer._generators())
         trainer.sampler.set_state(meta["sampler"])
         trainer.iteration, trainer.env_steps = int(meta["iteration"]), int(meta["env_steps"])
         return trainer
+
+    def _generators(self) -> dict[str, torch.Generator]:
+        # Worker processes keep their own generators, saved with the sampler's state.
+        gen = self.sampler.generator
+        return {} if gen is None else {"actions": gen}
 
     def save(self, directory: Path) -> Path:
         """Write the policy, baseline, normaliser and progress atomically to ``directory``."""
