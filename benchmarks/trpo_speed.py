@@ -5,7 +5,8 @@ Also reported: hrlp's time breakdown (env / inference / update), its fraction of
 ceiling, the same on the arm task ReachAndGrip2, and the peak resident memory of a 50,000-step hrlp batch
 (measured in a subprocess, so the figure is hrlp's alone).
 
-    python benchmarks/trpo_speed.py [--steps 100000] [--batch-steps 25000] [--arm-steps 50000] [--skip tianshou]
+    python benchmarks/trpo_speed.py [--steps 100000] [--batch-steps 25000] [--arm-steps 50000] [--workers 2]
+                                    [--skip tianshou]
 
 Goals: hrlp >= 10x sb3-contrib and >= 3x Tianshou in env steps/s; >= 50% of hrlp's wall time in physics on the
 arm tasks; a 50,000-step batch within 1 GB RSS.
@@ -94,11 +95,12 @@ def tianshou_steps_per_s(steps: int, seed: int, num_envs: int = 16) -> float:
     return done / (time.perf_counter() - t)
 
 
-def hrlp_run(task: str, steps: int, batch_steps: int, seed: int) -> dict[str, float]:
-    """hrlp TRPO (16 envs, batched inference): steps/s over the iterations and step-weighted time shares."""
+def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 1) -> dict[str, float]:
+    """hrlp TRPO (16 envs, batched inference, ``workers`` sampling processes): steps/s and step-weighted time shares
+    (with workers, the env and inference shares are those of the slowest worker, which overlap)."""
     from hrlp.train import TrainConfig, Trainer
 
-    trainer = Trainer(TrainConfig(task=task, steps=steps, batch_steps=batch_steps, num_envs=16, seed=seed))
+    trainer = Trainer(TrainConfig(task=task, steps=steps, batch_steps=batch_steps, num_envs=16, seed=seed, workers=workers))
     wall = 0.0
     shares = {"env": 0.0, "inference": 0.0, "update": 0.0}
     try:
@@ -180,6 +182,7 @@ def main() -> None:
     ap.add_argument("--rss-batch", type=int, default=50_000, help="batch_steps of the memory measurement")
     ap.add_argument("--rss-task", default=ARM_TASK)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=2, help="also run hrlp with this many sampling processes (1: skip)")
     ap.add_argument("--skip", default="", help="comma-separated: sb3,tianshou,arm,rss")
     ap.add_argument("--rss-child", help=argparse.SUPPRESS)
     ap.add_argument("--rss-baseline", action="store_true", help=argparse.SUPPRESS)
@@ -194,6 +197,10 @@ def main() -> None:
     hr = hrlp_run(TASK, args.steps, args.batch_steps, args.seed)
     rates["hrlp"] = hr["steps_per_s"]
     print(f"hrlp: {hr['steps_per_s']:.0f} steps/s", flush=True)
+    if args.workers > 1:
+        hw = hrlp_run(TASK, args.steps, args.batch_steps, args.seed, args.workers)
+        rates[f"hrlp {args.workers} workers"] = hw["steps_per_s"]
+        print(f"hrlp, {args.workers} workers: {hw['steps_per_s']:.0f} steps/s", flush=True)
     if "sb3" not in skip:
         rates["sb3-contrib"] = sb3_steps_per_s(args.steps, args.seed)
         print(f"sb3-contrib: {rates['sb3-contrib']:.0f} steps/s", flush=True)
@@ -207,9 +214,10 @@ def main() -> None:
     rates["physics alone"] = 1 / phys
 
     print(f"\n{TASK}, {args.steps} env steps each, torch threads 1")
-    print(f"{'':<16} {'steps/s':>10} {'hrlp / this':>12}")
+    best = max(v for k, v in rates.items() if k.startswith("hrlp"))
+    print(f"{'':<18} {'steps/s':>10} {'hrlp / this':>12} {'best hrlp / this':>17}")
     for name, r in rates.items():
-        print(f"{name:<16} {r:>10.0f} {rates['hrlp'] / r:>11.2f}x")
+        print(f"{name:<18} {r:>10.0f} {rates['hrlp'] / r:>11.2f}x {best / r:>16.2f}x")
     print(f"hrlp time shares: env {hr['env']:.1%}, inference {hr['inference']:.1%}, update {hr['update']:.1%}")
     print(f"hrlp mj_step share of wall: {hr['steps'] * phys / hr['wall']:.1%}")
 
