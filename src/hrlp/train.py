@@ -135,16 +135,19 @@ def env_factory(
 
 
 class _MacroFactory:
-    """Builds a Manager's environment; its skills are loaded once per process (not pickled: reloaded from disk)."""
+    """Builds a Manager's environment; its skills are loaded once per process (not pickled: a worker process reloads
+    them from disk and checks they are the same skills, by content hash)."""
 
-    def __init__(self, name: str, kwargs: dict[str, Any], macro: MacroSpec, gamma: float, skills: list | None = None) -> None:
+    def __init__(self, name: str, kwargs: dict[str, Any], macro: MacroSpec, gamma: float, skills: list) -> None:
         self.name, self.kwargs, self.macro, self.gamma, self._skills = name, kwargs, macro, gamma, skills
+        self.hashes = {s.name: s.content_hash for s in skills}
 
     def __call__(self) -> MacroEnv:
         from hrlp.envs import make
 
         if self._skills is None:
             self._skills = self.macro.load_skills()
+            check_skill_hashes(self.hashes, {s.name: s.content_hash for s in self._skills}, Path("skill library"))
         return MacroEnv(make(self.name, **self.kwargs), self._skills, self.macro.k, self.macro.micro, self.gamma)
 
     def __getstate__(self) -> dict[str, Any]:

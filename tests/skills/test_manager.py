@@ -158,3 +158,9 @@ def test_cli_train_manager_eval_and_render_label_the_active_skill(library, tmp_p
     r = runner.invoke(app, ["train-manager", "ReachAndGrip2", "--skills", "nosuch", "--run-dir", str(tmp_path / "x")])
     assert r.exit_code == 2 and "no skill 'nosuch'" in r.output
     assert not (tmp_path / "x").exists()
+
+
+def test_manager_trains_with_sampling_workers(library, tmp_path):
+    stats = list(train(_cfg(library, workers=2, steps=200), tmp_path / "w"))
+    assert stats[-1]["env_steps"] >= 200 and all(np.isfinite(s["trpo/kl"]) for s in stats)
+    assert 1 <= stats[0]["manager/mean_tau"] <= 4
