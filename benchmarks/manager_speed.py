@@ -6,7 +6,7 @@ steps, the Manager (shipped skills gripper + reacher, k = 15) with batches of ``
 Reported per kind: environment steps per second of sampling alone and of whole iterations (sampling + update),
 and the Manager / flat ratio.
 
-    python benchmarks/manager_speed.py [--rounds 3] [--flat-batch 15000] [--manager-batch 1000]
+    python benchmarks/manager_speed.py [--rounds 3] [--flat-batch 15000] [--manager-batch 1000] [--workers 2]
 
 Goal: the Manager's environment steps/s within 1.5x of flat training (ratio >= 0.67).
 """
@@ -23,11 +23,12 @@ from hrlp.skills.macro_env import MacroSpec
 from hrlp.train import TrainConfig, Trainer
 
 
-def main() -> None:
+def main() -> None:  # run under `if __name__ == "__main__"`: sampling workers are spawned processes
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3, help="alternating iterations per kind (after one warm-up each)")
     ap.add_argument("--flat-batch", type=int, default=15_000, help="environment steps per flat iteration")
     ap.add_argument("--manager-batch", type=int, default=1_000, help="decisions per Manager iteration")
+    ap.add_argument("--workers", type=int, default=2, help="also time the Manager with this many sampling processes")
     args = ap.parse_args()
     torch.set_num_threads(1)
     spec = MacroSpec(("gripper", "reacher"), k=15)
@@ -35,6 +36,9 @@ def main() -> None:
         "flat": Trainer(TrainConfig(task="ReachAndGrip2", batch_steps=args.flat_batch, num_envs=16)),
         "Manager": Trainer(TrainConfig(task="ReachAndGrip2", batch_steps=args.manager_batch, num_envs=16, macro=spec)),
     }
+    if args.workers > 1:
+        cfg = TrainConfig(task="ReachAndGrip2", batch_steps=args.manager_batch, num_envs=16, macro=spec, workers=args.workers)
+        trainers[f"Manager, {args.workers} workers"] = Trainer(cfg)
     sample: dict[str, list[float]] = {k: [] for k in trainers}
     whole: dict[str, list[float]] = {k: [] for k in trainers}
     for r in range(args.rounds + 1):
@@ -47,12 +51,14 @@ def main() -> None:
             batch_steps = st["time/steps_per_s"] * wall
             sample[kind].append(batch_steps / (wall * (st["time/env_share"] + st["time/inference_share"])))
             whole[kind].append(st["time/steps_per_s"])
-    print(f"{'kind':<8} {'sampling steps/s':>17} {'whole-iteration steps/s':>24}")
+    print(f"{'kind':<20} {'sampling steps/s':>17} {'whole-iteration steps/s':>24}")
     for kind in trainers:
-        print(f"{kind:<8} {statistics.median(sample[kind]):>17,.0f} {statistics.median(whole[kind]):>24,.0f}")
+        print(f"{kind:<20} {statistics.median(sample[kind]):>17,.0f} {statistics.median(whole[kind]):>24,.0f}")
     rs = statistics.median(sample["Manager"]) / statistics.median(sample["flat"])
     rw = statistics.median(whole["Manager"]) / statistics.median(whole["flat"])
     print(f"Manager / flat: sampling {rs:.2f}x, whole iteration {rw:.2f}x (goal: >= 0.67, i.e. within 1.5x)")
+    for tr in trainers.values():
+        tr.sampler.close()
 
 
 if __name__ == "__main__":

@@ -92,6 +92,62 @@ def demo(
 
 
 @app.command()
+def presets() -> None:
+    """List the paper's experiments as presets (runs, seeds, default budget)."""
+    from hrlp.experiments.presets import PRESETS
+
+    table = Table(title="presets (hrlp reproduce PRESET)")
+    for col in ("preset", "paper", "runs", "seeds", "budget", "metric", "description"):
+        table.add_column(col)
+    for p in PRESETS.values():
+        table.add_row(p.name, p.source, str(len(p.runs)), str(len(p.seeds)), f"{p.budget:,}", p.metric, p.description)
+    console.print(table)
+
+
+@app.command()
+def reproduce(
+    preset: Annotated[str, typer.Argument(help="A preset (see 'hrlp presets'), e.g. reach-and-grip-2.")],
+    seeds: Annotated[int | None, typer.Option(help="Seeds 0..N-1 per run (default: the preset's).")] = None,
+    budget: Annotated[int | None, typer.Option(help="Environment steps per run (default: the preset's).")] = None,
+    out: Annotated[Path, typer.Option(help="Root of the runs (OUT/PRESET/RUN/sSEED).")] = Path("runs/reproduce"),
+    backend: Annotated[str, typer.Option(help="process (a local process pool) or ray (a Ray cluster).")] = "process",
+    workers: Annotated[int, typer.Option(help="Runs at once on the process pool.")] = 2,
+    address: Annotated[str | None, typer.Option(help="Ray cluster address (default: start a local Ray).")] = None,
+) -> None:
+    """Run a preset's runs x seeds grid; finished runs are skipped, interrupted ones resume."""
+    from hrlp.checkpoint import CheckpointError
+    from hrlp.experiments.runner import reproduce as run_grid
+
+    def report(r: dict) -> None:
+        s = r.get("success")
+        what = f"success {s['mean']:.2f} [{s['low']:.2f}, {s['high']:.2f}]" if s else f"return {r['return']['mean']:.1f}"
+        note = " (already done)" if r.get("skipped") else f" in {r['wall_s'] / 60:.1f} min"
+        err_console.print(f"{r['preset']} / {r['run']} / seed {r['seed']}: {what}, {r['env_steps']:,} steps{note}")
+
+    try:
+        results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report)
+    except (ValueError, CheckpointError, ImportError) as e:
+        raise _fail(str(e)) from None
+    console.print(f"{len(results)} runs of {preset} in {out / preset}; tables: hrlp tables --root {out}")
+
+
+@app.command()
+def tables(
+    root: Annotated[Path, typer.Option(help="Root of the runs written by 'hrlp reproduce'.")] = Path("runs/reproduce"),
+    out: Annotated[Path, typer.Option(help="Directory for the markdown tables and PNG plots.")] = Path("docs/results"),
+) -> None:
+    """Rebuild the paper's tables (ours beside the paper's numbers) and learning curves from run directories."""
+    from hrlp.experiments.tables import build_tables
+
+    try:
+        files = build_tables(root, out)
+    except ValueError as e:
+        raise _fail(str(e)) from None
+    for f in files:
+        console.print(f"wrote {f}")
+
+
+@app.command()
 def theory(
     mdps: Annotated[int, typer.Option(help="Random MDPs to search (each with several policy pairs).")] = 200,
     seed: Annotated[int, typer.Option(help="Seed of the search.")] = 0,

@@ -1,0 +1,220 @@
+"""Every experiment of the paper as a named preset: a grid of training runs, each with its seeds.
+
+A preset lists runs (a name and a :class:`~hrlp.train.TrainConfig` without its seed) and the
+paper's number for each run where the paper gives one, so ``hrlp tables`` can print ours beside
+it. ``budget`` is the default number of environment steps per run; the paper's own budgets
+(50 million steps for a flat reach-and-grip run) are far beyond one machine, and
+``hrlp reproduce --budget`` overrides it.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field, replace
+
+from hrlp.algos.trpo import TRPOConfig
+from hrlp.skills.macro_env import MacroSpec, MicroAction
+from hrlp.train import TrainConfig
+
+#: The shipped Gripper skill's start set and training settings (scripts/train_shipped_skills.sh).
+GRIPPER_START = {"start_distance": [0.0, 0.09], "finger_opening": [0.0, 1.0]}
+
+
+@dataclass(frozen=True)
+class Run:
+    """One cell of a preset: a name, its settings (the seed is set per seed), and the paper's figure for it."""
+
+    name: str
+    config: TrainConfig
+    paper: float | None = None
+    """The paper's value of the preset's metric for this run (None where the paper gives none)."""
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A named experiment: runs x seeds, the metric its table reports, and where it is in the paper."""
+
+    name: str
+    description: str
+    source: str
+    """Where in the paper (section, figure)."""
+    runs: tuple[Run, ...]
+    metric: str = "success"
+    """'success' (Definition 1, evaluation episodes) or 'target_dist_sum'."""
+    seeds: tuple[int, ...] = (0, 1, 2)
+    budget: int = 1_000_000
+    """Default environment steps per run."""
+    eval_episodes: int = 100
+    tags: tuple[str, ...] = field(default_factory=tuple)
+
+    def with_budget(self, steps: int) -> Preset:
+        """The preset with every run's step budget set to ``steps``."""
+        return replace(self, budget=steps)
+
+    def config(self, run: Run, seed: int) -> TrainConfig:
+        """The full config of ``run`` with ``seed`` and this preset's budget."""
+        return replace(run.config, seed=seed, steps=self.budget)
+
+
+def _flat(task: str, batch: int = 50_000, **kw: object) -> TrainConfig:
+    return TrainConfig(task=task, batch_steps=batch, num_envs=16, **kw)  # type: ignore[arg-type]
+
+
+def _manager(task: str, skills: tuple[str, ...], k: int, micro: bool = False, **kw: object) -> TrainConfig:
+    spec = MacroSpec(skills, k=k, micro=MicroAction() if micro else None)
+    return TrainConfig(task=task, batch_steps=5_000, num_envs=16, macro=spec, **kw)  # type: ignore[arg-type]
+
+
+def _kl(max_kl: float) -> TRPOConfig:
+    return TRPOConfig(max_kl=max_kl)
+
+
+# Figure 6: the Gripper over c2 x tr (its table: the Gripper's own success rate).
+_FIG6 = {(3, 0.03): 0.984, (3, 0.06): 0.955, (4, 0.03): 0.989, (4, 0.06): 0.902}
+# Figure 7: reach-and-grip Experiment 2, Manager success per skill set and reward cell (c2, tr).
+_FIG7 = {
+    "gripper+micro": {(3, 0.03): 0.86, (3, 0.06): 0.74, (4, 0.03): 0.80, (4, 0.06): 0.65},
+    "gripper+reacher": {(3, 0.03): 0.17, (3, 0.06): 0.08, (4, 0.03): 0.32, (4, 0.06): 0.15},
+    "gripper+reacher+micro": {(3, 0.03): 0.92, (3, 0.06): 0.01, (4, 0.03): 0.75, (4, 0.06): 0.01},
+    "gripper+s-reacher": {(3, 0.03): 0.88, (3, 0.06): 0.69, (4, 0.03): 0.87, (4, 0.06): 0.70},
+}
+_FIG7_SKILLS = {
+    "gripper+micro": (("gripper",), True),
+    "gripper+reacher": (("gripper", "reacher"), False),
+    "gripper+reacher+micro": (("gripper", "reacher"), True),
+    "gripper+s-reacher": (("gripper", "s-reacher"), False),
+}
+_GRID = list(itertools.product((3, 4), (0.03, 0.06)))
+
+PRESETS: dict[str, Preset] = {
+    p.name: p
+    for p in (
+        Preset(
+            "gripper-grid",
+            "Gripper over the reward grid c2 x tr, the paper's start set widened to close, open-claw starts",
+            "Section 4.1, Figure 6",
+            tuple(
+                Run(
+                    f"c2={c2},tr={tr}",
+                    _flat(
+                        "Gripper",
+                        25_000,
+                        episode_steps=100,
+                        init_log_std=-1.0,
+                        task_kwargs={**GRIPPER_START, "c2": c2, "tr": tr},
+                    ),
+                    _FIG6[(c2, tr)],
+                )
+                for c2, tr in _GRID
+            ),
+            budget=4_000_000,
+        ),
+        Preset(
+            "reachers",
+            "Reacher Normal, Stabilised and 3D",
+            "Section 4.1, Experiment 3",
+            tuple(Run(t, _flat(t, 25_000)) for t in ("Reacher", "ReacherStabilised", "Reacher3D")),
+            budget=2_000_000,
+        ),
+        Preset(
+            "movers",
+            "Mover Plain (small start set) and Noised (large start set)",
+            "Section 4.1, Experiment 2",
+            tuple(Run(t, _flat(t, 25_000)) for t in ("MoverPlain", "MoverNoised")),
+            metric="target_dist_sum",
+            budget=4_000_000,
+        ),
+        Preset(
+            "reach-and-move-flat",
+            "reach-and-move, flat, over TargetCoeff",
+            "Section 4.2.1, Figure 4",
+            tuple(Run(f"target_coeff={c}", _flat("ReachAndMove", task_kwargs={"target_coeff": c})) for c in (1, 2, 5, 10)),
+            metric="target_dist_sum",
+        ),
+        Preset(
+            "reach-and-grip-1",
+            "reach-and-grip Experiment 1 (capsule fixed), Manager over gripper + reacher, k = 10",
+            "Section 4.3.1, Experiment 1",
+            (Run("gripper+reacher", _manager("ReachAndGrip1", ("gripper", "reacher"), 10)),),
+        ),
+        Preset(
+            "reach-and-grip-2",
+            "reach-and-grip Experiment 2, Manager over four skill sets x the reward grid c2 x tr, k = 15",
+            "Section 4.3.1, Figure 7",
+            tuple(
+                Run(
+                    f"{name},c2={c2},tr={tr}",
+                    _manager("ReachAndGrip2", skills, 15, micro, task_kwargs={"c2": c2, "tr": tr}),
+                    _FIG7[name][(c2, tr)],
+                )
+                for name, (skills, micro) in _FIG7_SKILLS.items()
+                for c2, tr in _GRID
+            ),
+        ),
+        Preset(
+            "reach-and-grip-2-flat",
+            "reach-and-grip Experiment 2, flat, with the angle curriculum over alpha (tr 0.08, c2 2.1)",
+            "Section 4.3.2, Figure 8",
+            tuple(
+                Run(
+                    f"alpha=pi*{a:g}/1e5",
+                    _flat("ReachAndGrip2", task_kwargs={"curriculum_alpha": math.pi * a / 1e5, "tr": 0.08, "c2": 2.1}),
+                )
+                for a in (0.1, 1, 10, 100)
+            ),
+        ),
+        Preset(
+            "reach-and-grip-2-flat-kl",
+            "reach-and-grip Experiment 2, flat, over the maximal KL (curriculum alpha = pi / 1e5)",
+            "Appendix B.2, Figure 10",
+            tuple(
+                Run(f"max_kl={kl:g}", _flat("ReachAndGrip2", trpo=_kl(kl), task_kwargs={"curriculum_alpha": math.pi / 1e5}))
+                for kl in (0.001, 0.01, 0.1)
+            ),
+        ),
+        Preset(
+            "manager-kl",
+            "Appendix C: the Manager (gripper + reacher, Experiment 2) over the maximal KL",
+            "Appendix C",
+            tuple(
+                Run(f"max_kl={kl:g}", _manager("ReachAndGrip2", ("gripper", "reacher"), 15, trpo=_kl(kl)))
+                for kl in (0.003, 0.01, 0.03)
+            ),
+        ),
+        Preset(
+            "manager-k",
+            "Appendix C: the Manager (gripper + reacher, Experiment 2) over the macro length k",
+            "Appendix C",
+            tuple(Run(f"k={k}", _manager("ReachAndGrip2", ("gripper", "reacher"), k)) for k in (5, 10, 15, 25)),
+        ),
+        Preset(
+            "manager-size",
+            "Appendix C: the Manager (gripper + reacher, Experiment 2) over its hidden layer width",
+            "Appendix C",
+            tuple(
+                Run(f"hidden={h}", _manager("ReachAndGrip2", ("gripper", "reacher"), 15, hidden=(h, h))) for h in (32, 64, 128)
+            ),
+        ),
+        Preset(
+            "micro-bounds",
+            "Appendix C: gripper + reacher + micro with bounded or penalised micro-actions",
+            "Appendix C",
+            tuple(
+                Run(
+                    name,
+                    replace(
+                        _manager("ReachAndGrip2", ("gripper", "reacher"), 15),
+                        macro=MacroSpec(("gripper", "reacher"), k=15, micro=micro),
+                    ),
+                )
+                for name, micro in (
+                    ("free", MicroAction()),
+                    ("torque<=0.3", MicroAction(max_torque=0.3)),
+                    ("duration=5", MicroAction(duration=5)),
+                    ("penalty=0.5", MicroAction(penalty=0.5)),
+                )
+            ),
+        ),
+    )
+}

@@ -1,0 +1,162 @@
+"""``hrlp reproduce``: run a preset's runs x seeds grid on a process pool or a Ray cluster, idempotently.
+
+Each run lives in ``OUT/PRESET/RUN/sSEED``: the training run (checkpoint, logs) and, once it is
+finished and evaluated, ``result.json``. Runs with a result for at least the requested budget are
+skipped; interrupted runs resume from their checkpoints; a larger ``--budget`` continues finished
+runs. Every job trains in its own process with one torch thread.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import tempfile
+import time
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hrlp.experiments.presets import PRESETS, Preset
+from hrlp.train import TrainConfig
+
+BACKENDS = ("process", "ray")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One training run of a preset: where it lives and its full settings."""
+
+    preset: str
+    run: str
+    seed: int
+    run_dir: Path
+    config: TrainConfig
+    eval_episodes: int
+    paper: float | None
+
+
+def run_dir_name(run: str) -> str:
+    """A directory name for a run name (``c2=3,tr=0.03`` -> ``c2=3,tr=0.03``; unsafe characters become ``_``)."""
+    return re.sub(r"[^A-Za-z0-9_.,=+-]", "_", run)
+
+
+def plan(preset: Preset, out: Path, seeds: tuple[int, ...] | None = None) -> list[Job]:
+    """The preset's jobs, runs x seeds, in a stable order."""
+    return [
+        Job(
+            preset.name,
+            r.name,
+            s,
+            out / preset.name / run_dir_name(r.name) / f"s{s}",
+            preset.config(r, s),
+            preset.eval_episodes,
+            r.paper,
+        )
+        for r in preset.runs
+        for s in (seeds if seeds is not None else preset.seeds)
+    ]
+
+
+def read_result(run_dir: Path) -> dict[str, Any] | None:
+    """A finished run's ``result.json``, or None."""
+    path = run_dir / "result.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """Train (or resume) and evaluate one job, write ``result.json`` atomically and return it; skip if done."""
+    import torch
+
+    from hrlp.evaluate import evaluate_run
+    from hrlp.plots import read_progress
+    from hrlp.train import train
+
+    done = read_result(job.run_dir)
+    if done is not None and done["env_steps"] >= job.config.steps:
+        return {**done, "skipped": True}
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    resume = (job.run_dir / "checkpoint").exists()
+    for _ in train(job.config, job.run_dir, resume=resume):
+        pass
+    ev = evaluate_run(job.run_dir, episodes=job.eval_episodes)
+    result = {
+        "preset": job.preset,
+        "run": job.run,
+        "seed": job.seed,
+        "config": job.config.to_json(),
+        "env_steps": int(read_progress(job.run_dir)["env_steps"][-1]),
+        "wall_s": time.perf_counter() - t0 + (done or {}).get("wall_s", 0.0),
+        "episodes": ev.episodes,
+        "success": None if ev.success is None else vars(ev.success),
+        "return": vars(ev.ret),
+        "target_dist_sum": None if ev.target_dist_sum is None else vars(ev.target_dist_sum),
+        "macro_usage": ev.macro_usage,
+        "paper": job.paper,
+    }
+    _write_json(job.run_dir / "result.json", result)
+    return result
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=".result.", suffix=".json", dir=path.parent)
+    with os.fdopen(fd, "w") as f:
+        json.dump(data, f, indent=2)
+    os.replace(tmp, path)
+
+
+def reproduce(
+    preset_name: str | Preset,
+    out: Path = Path("runs/reproduce"),
+    seeds: int | None = None,
+    budget: int | None = None,
+    backend: str = "process",
+    workers: int = 2,
+    address: str | None = None,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Run every job of the preset (a name or a :class:`Preset`; its first ``seeds`` seeds, ``budget`` steps each)
+    and return their results.
+
+    Raises ValueError for an unknown preset, backend or bad numbers, and for a missing skill, before any compute.
+    """
+    if isinstance(preset_name, str) and preset_name not in PRESETS:
+        raise ValueError(f"unknown preset {preset_name!r}; known: {', '.join(PRESETS)}")
+    if backend not in BACKENDS:
+        raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if (seeds is not None and seeds < 1) or (budget is not None and budget < 1) or workers < 1:
+        raise ValueError("--seeds, --budget and --workers must be positive")
+    preset = PRESETS[preset_name] if isinstance(preset_name, str) else preset_name
+    if budget is not None:
+        preset = preset.with_budget(budget)
+    jobs = plan(preset, out, None if seeds is None else tuple(range(seeds)))
+    for cfg in {id(j.config.macro): j.config.macro for j in jobs if j.config.macro is not None}.values():
+        cfg.load_skills()  # a missing skill fails now
+    results: list[dict[str, Any]] = []
+    if backend == "ray":
+        import ray
+
+        ray.init(address=address, ignore_reinit_error=True, include_dashboard=False, log_to_driver=False)
+        remote = ray.remote(num_cpus=1)(run_job)
+        pending = {remote.remote(j): j for j in jobs}
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            res = ray.get(ready[0])
+            pending.pop(ready[0])
+            results.append(res)
+            if on_result:
+                on_result(res)
+        return results
+    import multiprocessing as mp
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        futures = [pool.submit(run_job, j) for j in jobs]
+        for f in as_completed(futures):
+            res = f.result()
+            results.append(res)
+            if on_result:
+                on_result(res)
+    return results

@@ -1,0 +1,64 @@
+"""Presets, the reproduction runner (process pool and Ray) and the tables, at tiny budgets."""
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from hrlp.cli import app
+from hrlp.experiments.presets import PRESETS, Preset, Run
+from hrlp.experiments.runner import plan, reproduce
+from hrlp.experiments.tables import bootstrap_interval, build_tables
+from hrlp.train import TrainConfig
+
+
+def _tiny(name="tiny"):
+    cfg = TrainConfig(task="Reacher", batch_steps=60, num_envs=2, episode_steps=15)
+    runs = (Run("normal", cfg, paper=0.5), Run("stabilised", TrainConfig(**{**cfg.__dict__, "task": "ReacherStabilised"})))
+    return Preset(name, "two Reachers", "test", runs, seeds=(0, 1), budget=60, eval_episodes=2)
+
+
+def test_every_preset_builds_valid_configs_with_distinct_run_names():
+    for p in PRESETS.values():
+        assert len({r.name for r in p.runs}) == len(p.runs), p.name
+        for job in plan(p, __import__("pathlib").Path("out")):
+            assert job.config.steps == p.budget and job.config.seed in p.seeds
+    fig7 = {r.name: r.paper for r in PRESETS["reach-and-grip-2"].runs}
+    assert fig7["gripper+micro,c2=3,tr=0.03"] == 0.86 and fig7["gripper+s-reacher,c2=4,tr=0.06"] == 0.70
+
+
+def test_runner_is_idempotent_resumable_and_tables_rebuild(tmp_path):
+    preset = _tiny()
+    first = reproduce(preset, tmp_path, workers=2)
+    assert len(first) == 4 and not any(r.get("skipped") for r in first)
+    result = json.loads((tmp_path / "tiny" / "normal" / "s1" / "result.json").read_text())
+    assert result["seed"] == 1 and result["env_steps"] == 60 and 0 <= result["success"]["mean"] <= 1
+    again = reproduce(preset, tmp_path, workers=2)
+    assert all(r["skipped"] for r in again)
+    # A bigger budget continues the finished runs from their checkpoints.
+    more = reproduce(preset, tmp_path, budget=120, seeds=1, workers=2)
+    assert len(more) == 2 and all(r["env_steps"] == 120 and not r.get("skipped") for r in more)
+    files = build_tables(tmp_path, tmp_path / "results")
+    table = (tmp_path / "results" / "tiny.md").read_text()
+    assert "| normal | 2 |" in table and "| 0.5 |" in table and any(f.suffix == ".png" for f in files)
+
+
+def test_bootstrap_interval_and_bad_input(tmp_path):
+    m, lo, hi = bootstrap_interval([0.2, 0.4, 0.6, 0.8])
+    assert m == pytest.approx(0.5) and lo < m < hi
+    assert bootstrap_interval([0.3]) == (0.3, 0.3, 0.3)
+    r = CliRunner().invoke(app, ["reproduce", "nosuch", "--out", str(tmp_path)])
+    assert r.exit_code == 2 and "unknown preset" in r.output
+    r = CliRunner().invoke(app, ["reproduce", "reachers", "--backend", "dask", "--out", str(tmp_path)])
+    assert r.exit_code == 2 and "--backend" in r.output
+    r = CliRunner().invoke(app, ["tables", "--root", str(tmp_path / "none")])
+    assert r.exit_code == 2 and "no finished runs" in r.output
+
+
+def test_ray_backend_runs_the_same_grid_on_a_local_ray_instance(tmp_path):
+    ray = pytest.importorskip("ray")
+    try:
+        results = reproduce(_tiny("tiny-ray"), tmp_path, seeds=1, backend="ray")
+    finally:
+        ray.shutdown()
+    assert len(results) == 2 and all((tmp_path / "tiny-ray" / r["run"] / "s0" / "result.json").exists() for r in results)
