@@ -28,11 +28,11 @@ class DemoResult:
 
 
 def demo_config(steps: int = 1_500_000, seed: int = 0) -> TrainConfig:
-    """The demo's Manager: ReachAndGrip2, skills gripper + reacher (shipped), k = 15, 1,000 decisions per iteration."""
+    """The demo's Manager: ReachAndGrip2, skills gripper + reacher (shipped), k = 15, 2,000 decisions per iteration."""
     return TrainConfig(
         task="ReachAndGrip2",
         steps=steps,
-        batch_steps=1_000,
+        batch_steps=2_000,
         num_envs=16,
         seed=seed,
         macro=MacroSpec(("gripper", "reacher"), k=15),
