@@ -85,3 +85,23 @@ def test_skills_cli_add_list_show(reacher_run, tmp_path):
     assert r.exit_code == 2 and "no skill 'missing'" in r.output
     r = runner.invoke(app, ["skills", "add", str(reacher_run), "--name", "bad", "--k", "0", "--library", lib])
     assert r.exit_code == 2 and "positive integer" in r.output
+
+
+def test_shipped_skills_load_frozen_and_the_reacher_reaches():
+    from hrlp.skills import load_skill, shipped_library_root
+
+    shipped = SkillLibrary(shipped_library_root())
+    assert {"gripper", "reacher", "reacher3d", "s-reacher"} <= set(shipped.names())
+    for name in shipped.names():
+        m = shipped.manifest(name)
+        assert m["trained"]["config"]["seed"] == 0 and m["trained"]["env_steps"] > 1_000_000
+        assert shipped.load(name).content_hash == m["sha256"]
+    reacher = load_skill("reacher", library=shipped.root)
+    env = make("Reacher")
+    for seed in (0, 1):
+        obs, _ = env.reset(seed=seed)
+        for _ in range(300):
+            obs, _, _, truncated, info = env.step(reacher.act(obs[None, :24], env.task.goal[None])[0])
+            if truncated:
+                break
+        assert info["success"], seed

@@ -26,7 +26,7 @@ def default_library_root() -> Path:
 
 
 def shipped_library_root() -> Path:
-    """The small pretrained skills that come with hrlp (trained by ``benchmarks/train_skills.py``)."""
+    """The small pretrained skills that come with hrlp (trained by ``scripts/train_shipped_skills.sh``)."""
     return Path(__file__).parent / "pretrained"
 
 
