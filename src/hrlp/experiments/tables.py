@@ -49,7 +49,11 @@ def collect(root: Path) -> dict[str, dict[str, list[tuple[Path, dict[str, Any]]]
 
 
 def build_tables(root: Path, out: Path) -> list[Path]:
-    """Write ``out/PRESET.md`` and ``out/PRESET.png`` for every preset with results; returns the files written."""
+    """Write ``out/PRESET.md`` and ``out/PRESET.png`` for every preset with results; returns the files written.
+
+    Each run's cell is the mean over seeds with a 95% percentile-bootstrap interval across seeds; a run with a
+    single seed shows that run's own interval over its evaluation episodes (Wilson for success).
+    """
     from hrlp.plots import plot_learning_curves
 
     data = collect(root)
@@ -64,7 +68,8 @@ def build_tables(root: Path, out: Path) -> list[Path]:
         lines = [
             f"# {preset_name}" + (f": {preset.description} ({preset.source})" if preset else ""),
             "",
-            f"Metric: {metric.replace('_', ' ')} (mean over seeds, 95% bootstrap interval across seeds). "
+            f"Metric: {metric.replace('_', ' ')} (mean over seeds, 95% bootstrap interval across seeds; for a single "
+            "seed, that run's own 95% interval over its evaluation episodes). "
             f"Rebuild: `hrlp tables --root {root} --out {out}`.",
             "",
             "| run | seeds | ours | paper | env steps per run | wall time (h, all seeds) |",
@@ -74,6 +79,8 @@ def build_tables(root: Path, out: Path) -> list[Path]:
             results = [r for _, r in runs[name]]
             values = [v for v in (metric_value(r, metric) for r in results) if v is not None]
             m, lo, hi = bootstrap_interval(values)
+            if len(results) == 1 and results[0].get(metric):  # one seed: its own interval over evaluation episodes
+                lo, hi = float(results[0][metric]["low"]), float(results[0][metric]["high"])
             paper = results[0].get("paper")
             steps = sorted({int(r["env_steps"]) for r in results})
             wall = sum(float(r["wall_s"]) for r in results) / 3600
