@@ -260,14 +260,10 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, max_kl: float, 
            resume: bool, steps: int | None) -> Path:  # fmt: skip
     """Shared body of ``train`` and ``train-manager``: build and check the config, then train with a progress bar."""
     import dataclasses
-    import math
-
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     from hrlp.algos.trpo import TRPOConfig
     from hrlp.checkpoint import CheckpointError
-    from hrlp.train import TrainConfig, env_factory
-    from hrlp.train import train as run_training
+    from hrlp.train import TrainConfig, env_factory, train_with_progress
 
     task = settings["task"]
     out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{settings['seed']}"
@@ -290,18 +286,9 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, max_kl: float, 
         env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
-    columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-               TextColumn("{task.fields[status]}")]  # fmt: skip
     kind = "train-manager" if cfg.macro is not None else "train"
     try:
-        with Progress(*columns, console=err_console) as progress:
-            bar = progress.add_task(f"{kind} {cfg.task}", total=cfg.steps, status="")
-            for st in run_training(cfg, out, resume=resume):
-                status = f"return {st['return_mean']:.1f}"
-                if not math.isnan(st["success_rate"]):
-                    status += f"  success {st['success_rate']:.2f}"
-                status += f"  kl {st['trpo/kl']:.4f}  {st['time/steps_per_s']:.0f} steps/s"
-                progress.update(bar, completed=min(st["env_steps"], cfg.steps), status=status)
+        train_with_progress(cfg, out, resume, err_console, f"{kind} {cfg.task}")
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
     console.print(f"run written to {out} (checkpoint: {out / 'checkpoint'}, logs: progress.csv, tb/)")

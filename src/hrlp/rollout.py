@@ -343,7 +343,7 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
                 env0, inf0 = sampler.timing.env, sampler.timing.inference
                 batch, episodes = sampler.collect(steps)
                 reply = {
-                    "batch": {**{f.name: getattr(batch, f.name) for f in dataclasses.fields(batch)}},
+                    "batch": {f.name: getattr(batch, f.name) for f in dataclasses.fields(batch)},
                     "episodes": episodes,
                     "raw": sampler.last_raw_obs,
                     "env": sampler.timing.env - env0,

@@ -295,6 +295,7 @@ class TrainedPolicy:
     normalizer: RunningNormalizer
     config: TrainConfig
     meta: dict[str, Any]
+    _decoder: tuple[gym.Space, Callable] | None = field(default=None, repr=False)
 
     def make_env(self, **kwargs: Any) -> gym.Env:
         """A fresh environment of the run (a :class:`MacroEnv` for a Manager); ``kwargs`` go to the task."""
@@ -304,7 +305,9 @@ class TrainedPolicy:
     def act(self, env: gym.Env, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> Any:
         """The action for one raw observation, in ``env``'s action space (clipped / a parameterised tuple)."""
         a = self.policy.act_numpy(self.normalizer(obs, update=False)[None].astype(np.float32), generator, deterministic)
-        return action_decoder(env.action_space)(a)[0]
+        if self._decoder is None or self._decoder[0] is not env.action_space:  # built once per environment, not per step
+            self._decoder = (env.action_space, action_decoder(env.action_space))
+        return self._decoder[1](a)[0]
 
 
 def load_trained(run_dir: Path) -> TrainedPolicy:
@@ -392,6 +395,23 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> Iterator[dic
     finally:
         logger.close()
         trainer.sampler.close()
+
+
+def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, console: Any = None,
+                        description: str | None = None) -> None:  # fmt: skip
+    """:func:`train` behind a rich progress bar on ``console`` (return, success, KL and steps/s so far)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+               TextColumn("{task.fields[status]}")]  # fmt: skip
+    with Progress(*columns, console=console) as progress:
+        bar = progress.add_task(description or f"train {cfg.task}", total=cfg.steps, status="")
+        for st in train(cfg, run_dir, resume=resume):
+            status = f"return {st['return_mean']:.1f}"
+            if not math.isnan(st["success_rate"]):
+                status += f"  success {st['success_rate']:.2f}"
+            status += f"  kl {st['trpo/kl']:.4f}  {st['time/steps_per_s']:.0f} steps/s"
+            progress.update(bar, completed=min(st["env_steps"], cfg.steps), status=status)
 
 
 def _truncate_log(path: Path, iteration: int) -> None:

@@ -45,14 +45,11 @@ def run_demo(out_dir: Path, steps: int = 1_500_000, seed: int = 0, episodes: int
     """Train (or continue) the demo Manager in ``out_dir``, evaluate it, write ``demo.mp4`` (``video_steps``
     low-level steps, 0 for one episode) and ``learning_curve.png``."""
     import dataclasses
-    import math
-
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     from hrlp.checkpoint import load_checkpoint
     from hrlp.evaluate import evaluate_run
     from hrlp.plots import plot_learning_curves
-    from hrlp.train import train
+    from hrlp.train import train_with_progress
     from hrlp.video import rollout_frames, write_video
 
     console = console or Console(stderr=True)
@@ -63,14 +60,7 @@ def run_demo(out_dir: Path, steps: int = 1_500_000, seed: int = 0, episodes: int
         if dataclasses.replace(saved, steps=cfg.steps) != cfg:
             raise ValueError(f"{out_dir} holds a different run; choose another --out-dir")
     cfg.macro.load_skills()  # a missing shipped skill fails here, before any compute
-    columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-               TextColumn("{task.fields[status]}")]  # fmt: skip
-    with Progress(*columns, console=console) as progress:
-        bar = progress.add_task("Manager on ReachAndGrip2", total=cfg.steps, status="")
-        for st in train(cfg, out_dir, resume=resume):
-            status = f"success {st['success_rate']:.2f}" if not math.isnan(st["success_rate"]) else ""
-            status += f"  {st['time/steps_per_s']:.0f} steps/s"
-            progress.update(bar, completed=min(st["env_steps"], cfg.steps), status=status)
+    train_with_progress(cfg, out_dir, resume, console, "Manager on ReachAndGrip2")
     ev = evaluate_run(out_dir, episodes=episodes)
     video = out_dir / "demo.mp4"
     frames, fps, _ = rollout_frames(out_dir, steps=video_steps, seed=seed, console=console)

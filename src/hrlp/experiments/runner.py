@@ -133,8 +133,8 @@ def reproduce(
     if budget is not None:
         preset = preset.with_budget(budget)
     jobs = plan(preset, out, None if seeds is None else tuple(range(seeds)))
-    for cfg in {id(j.config.macro): j.config.macro for j in jobs if j.config.macro is not None}.values():
-        cfg.load_skills()  # a missing skill fails now
+    for spec in {j.config.macro for j in jobs if j.config.macro is not None}:
+        spec.load_skills()  # a missing skill fails now
     results: list[dict[str, Any]] = []
     if backend == "ray":
         import ray
