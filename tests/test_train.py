@@ -14,7 +14,7 @@ from hrlp.checkpoint import load_checkpoint
 from hrlp.cli import app
 from hrlp.evaluate import evaluate_run, mean_interval, wilson_interval
 from hrlp.rollout import Sampler
-from hrlp.train import TrainConfig, Trainer, env_factory, load_policy, train
+from hrlp.train import TrainConfig, Trainer, env_factory, load_policy, load_trained, train
 
 TINY = {"steps": 400, "batch_steps": 200, "num_envs": 4, "episode_steps": 30}
 
@@ -37,6 +37,22 @@ def test_training_writes_logs_and_a_checkpoint_that_evaluates(tmp_path):
     assert meta["iteration"] == 2 and "policy.log_std" in tensors
     ev = evaluate_run(tmp_path, episodes=3)
     assert ev.episodes == 3 and math.isfinite(ev.ret.mean) and ev.success is not None
+
+
+def test_evaluation_uses_the_full_start_set_of_a_curriculum_run(tmp_path):
+    cfg = TrainConfig(task="ReachAndGrip2", task_kwargs={"curriculum_alpha": 1e-6}, **TINY)
+    list(train(cfg, tmp_path))
+    trained = load_trained(tmp_path)
+    env = trained.make_env()
+    # In training the first episodes start within 1e-6 rad of angle 0; evaluation draws from the whole circle.
+    assert env.unwrapped.task.curriculum_alpha is None
+    angles = []
+    for k in range(8):
+        env.reset(seed=k)
+        c = env.unwrapped.physics.capsule
+        angles.append(math.atan2(c[1], c[0]))
+    assert max(abs(a) for a in angles) > 0.5
+    env.close()
 
 
 def test_saved_policy_acts_like_the_trained_one(tmp_path):

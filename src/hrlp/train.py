@@ -287,6 +287,12 @@ def check_skill_hashes(saved: dict[str, str], loaded: dict[str, str], where: Pat
             )
 
 
+#: Task arguments that shape training only; evaluation and rendering leave them out. The angle curriculum of
+#: Section 4.3.2 narrows the start set for the first episodes of every environment, so a fresh evaluation
+#: environment would otherwise see only the easiest starts.
+TRAINING_ONLY_TASK_ARGS = frozenset({"curriculum_alpha"})
+
+
 @dataclass
 class TrainedPolicy:
     """A trained run's policy ready to act in its environment: frozen normaliser, actions decoded for the env."""
@@ -298,9 +304,13 @@ class TrainedPolicy:
     _decoder: tuple[gym.Space, Callable] | None = field(default=None, repr=False)
 
     def make_env(self, **kwargs: Any) -> gym.Env:
-        """A fresh environment of the run (a :class:`MacroEnv` for a Manager); ``kwargs`` go to the task."""
+        """A fresh environment of the run (a :class:`MacroEnv` for a Manager); ``kwargs`` go to the task.
+
+        Training-only task arguments (:data:`TRAINING_ONLY_TASK_ARGS`, e.g. the angle curriculum) are dropped, so
+        a run is evaluated and shown on the task's full start distribution."""
         cfg = self.config
-        return env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **{**cfg.task_kwargs, **kwargs})()
+        task_kwargs = {k: v for k, v in cfg.task_kwargs.items() if k not in TRAINING_ONLY_TASK_ARGS}
+        return env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **{**task_kwargs, **kwargs})()
 
     def act(self, env: gym.Env, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> Any:
         """The action for one raw observation, in ``env``'s action space (clipped / a parameterised tuple)."""

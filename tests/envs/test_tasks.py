@@ -163,6 +163,21 @@ def test_curriculum_grows_the_start_angle_by_alpha_per_episode():
     assert ReachAndGripTask(experiment=1).angle_half_width(0) == pytest.approx(math.pi)
 
 
+@pytest.mark.parametrize("seed", [0, 2, 6])
+def test_a_curriculum_at_its_narrowest_always_finds_a_start(seed):
+    # Regression: with w ~ 0 the palm was drawn right above the capsule, where ~7% of IK poses are
+    # contact-free, and resets after some random steps raised StartError (seeds 0, 2 and 6 did).
+    env = make("ReachAndGrip2", curriculum_alpha=1e-6)
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    for _ in range(30):
+        for _ in range(30):
+            env.step(rng.uniform(-1, 1, size=env.action_space.shape).astype(np.float32))
+        env.reset()
+        c = env.physics.capsule
+        assert abs(math.atan2(c[1], c[0] + 0.15)) < 1e-3  # the capsule stays at the curriculum's angle
+
+
 def test_reach_and_grip_experiment_1_fixes_the_capsule_and_experiment_2_does_not():
     def capsules(name):
         env = make(name)

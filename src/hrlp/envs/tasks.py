@@ -29,6 +29,8 @@ CIRCLE_RADIUS = 0.30
 #: Height of the palm's (H's) start circle in the reach-and-grip experiments. At 0.15 m the hand cannot
 #: reach the angles behind the arm (|angle| > 140 degrees); at 0.08 m it reaches all of them.
 PALM_CIRCLE_Z = 0.08
+#: Least half-width (radians) of the palm's start angles in reach-and-grip, whatever the curriculum's w.
+PALM_MIN_HALF_WIDTH = 0.3
 
 
 def circle_point(angle: float, z: float = CAPSULE_REST_Z, radius: float = CIRCLE_RADIUS) -> np.ndarray:
@@ -379,7 +381,9 @@ class ReachAndGripTask(Task):
     radius, 8 cm above the table) at a random angle. Experiment 2: the capsule's angle and the
     palm's angle are drawn independently. Angles are uniform in [-w, w] with w = pi (the full
     circle), or, with the flat-baseline curriculum of Section 4.3.2, w = min(pi, k * alpha) after
-    the k-th episode of this environment. Reward: :class:`GripReward`. Success: Definition 1.
+    the k-th episode of this environment; the palm's range never narrows below
+    [-PALM_MIN_HALF_WIDTH, PALM_MIN_HALF_WIDTH] (0.3 rad), as the palm right above the capsule has
+    few contact-free poses. Reward: :class:`GripReward`. Success: Definition 1.
     """
 
     experiment: int = 1
@@ -411,8 +415,11 @@ class ReachAndGripTask(Task):
         _hide_target(physics)
         w = self.angle_half_width(episode)
         _place_capsule(physics, _angle(rng, w) if self.experiment == 2 else 0.0)
-        # A palm angle next to the capsule's can leave no contact-free pose; such angles are redrawn.
-        arm_with_hand_at(physics, rng, lambda: circle_point(_angle(rng, w), z=PALM_CIRCLE_Z))
+        # A palm angle next to the capsule's can leave no contact-free pose; such angles are redrawn. Right above
+        # the capsule only ~7% of IK poses are clear, so early in a curriculum (w ~ 0) the palm's range stays
+        # at least PALM_MIN_HALF_WIDTH wide.
+        palm_w = max(w, PALM_MIN_HALF_WIDTH)
+        arm_with_hand_at(physics, rng, lambda: circle_point(_angle(rng, palm_w), z=PALM_CIRCLE_Z))
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
         return _grip_terms(self.reward, self.sparse, physics)
