@@ -6,7 +6,10 @@ ceiling, the same on the arm task ReachAndGrip2, and the peak resident memory of
 (measured in a subprocess, so the figure is hrlp's alone).
 
     python benchmarks/trpo_speed.py [--steps 100000] [--batch-steps 25000] [--arm-steps 50000] [--workers 2]
-                                    [--skip tianshou]
+                                    [--fisher-fraction 0.1] [--fast-envs 64] [--skip tianshou]
+
+hrlp runs three ways: its defaults in one process; with ``--workers`` sampling processes; and "fast", which adds
+Fisher-vector products on a 10% subsample (Schulman et al. 2015, Section 6) and 64 environments.
 
 Goals: hrlp >= 10x sb3-contrib and >= 3x Tianshou in env steps/s; >= 50% of hrlp's wall time in physics on the
 arm tasks; a 50,000-step batch within 1 GB RSS.
@@ -95,14 +98,22 @@ def tianshou_steps_per_s(steps: int, seed: int, num_envs: int = 16) -> float:
     return done / (time.perf_counter() - t)
 
 
-def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 1) -> dict[str, float]:
-    """hrlp TRPO (16 envs, batched inference, ``workers`` sampling processes): steps/s and step-weighted time shares
-    (with workers, the env and inference shares are those of the slowest worker, which overlap)."""
+def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 1, fisher_fraction: float = 1.0,
+             num_envs: int = 16) -> dict[str, float]:  # fmt: skip
+    """hrlp TRPO (batched inference over ``num_envs`` envs, ``workers`` sampling processes): steps/s and step-weighted
+    time shares (with workers, the env and inference shares are those of the slowest worker; they overlap with the
+    value fit, which runs in the main process meanwhile)."""
+    from hrlp.algos.trpo import TRPOConfig
+    from hrlp.algos.value import fit_value
     from hrlp.train import TrainConfig, Trainer
 
-    trainer = Trainer(TrainConfig(task=task, steps=steps, batch_steps=batch_steps, num_envs=16, seed=seed, workers=workers))
+    trpo = TRPOConfig(fisher_fraction=fisher_fraction)
+    cfg = TrainConfig(
+        task=task, steps=steps, batch_steps=batch_steps, num_envs=num_envs, seed=seed, workers=workers, trpo=trpo
+    )
+    trainer = Trainer(cfg)
     wall = 0.0
-    shares = {"env": 0.0, "inference": 0.0, "update": 0.0}
+    shares = {"env": 0.0, "inference": 0.0, "value_fit": 0.0, "update": 0.0}
     try:
         while trainer.env_steps < steps:
             t = time.perf_counter()
@@ -111,6 +122,12 @@ def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 
             wall += dt
             for k in shares:
                 shares[k] += s[f"time/{k}_share"] * dt
+        # Each batch's baseline fit runs in the next iteration; the last batch's is timed here so every batch pays.
+        t = time.perf_counter()
+        fit_value(trainer.value_net, *trainer.pending_value_fit, trainer.cfg.value)
+        dt = time.perf_counter() - t
+        wall += dt
+        shares["value_fit"] += dt
     finally:
         trainer.sampler.close()
     return {"steps": trainer.env_steps, "wall": wall, "steps_per_s": trainer.env_steps / wall,
@@ -183,6 +200,8 @@ def main() -> None:
     ap.add_argument("--rss-task", default=ARM_TASK)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2, help="also run hrlp with this many sampling processes (1: skip)")
+    ap.add_argument("--fisher-fraction", type=float, default=0.1, help="Fisher subsample of the fast hrlp run")
+    ap.add_argument("--fast-envs", type=int, default=64, help="environments of the fast hrlp run")
     ap.add_argument("--skip", default="", help="comma-separated: sb3,tianshou,arm,rss")
     ap.add_argument("--rss-child", help=argparse.SUPPRESS)
     ap.add_argument("--rss-baseline", action="store_true", help=argparse.SUPPRESS)
@@ -194,13 +213,16 @@ def main() -> None:
     skip = set(filter(None, args.skip.split(",")))
 
     rates: dict[str, float] = {}
-    hr = hrlp_run(TASK, args.steps, args.batch_steps, args.seed)
-    rates["hrlp"] = hr["steps_per_s"]
-    print(f"hrlp: {hr['steps_per_s']:.0f} steps/s", flush=True)
-    if args.workers > 1:
-        hw = hrlp_run(TASK, args.steps, args.batch_steps, args.seed, args.workers)
-        rates[f"hrlp {args.workers} workers"] = hw["steps_per_s"]
-        print(f"hrlp, {args.workers} workers: {hw['steps_per_s']:.0f} steps/s", flush=True)
+    runs: dict[str, dict[str, float]] = {}
+    fast = {"workers": args.workers, "fisher_fraction": args.fisher_fraction, "num_envs": args.fast_envs}
+    fast_name = f"hrlp fast ({args.workers} workers, Fisher {args.fisher_fraction:g}, {args.fast_envs} envs)"
+    configs = {"hrlp": {}, f"hrlp {args.workers} workers": {"workers": args.workers}, fast_name: fast}
+    for name, kw in configs.items():
+        if name != "hrlp" and args.workers < 2:
+            continue
+        runs[name] = hrlp_run(TASK, args.steps, args.batch_steps, args.seed, **kw)
+        rates[name] = runs[name]["steps_per_s"]
+        print(f"{name}: {rates[name]:.0f} steps/s", flush=True)
     if "sb3" not in skip:
         rates["sb3-contrib"] = sb3_steps_per_s(args.steps, args.seed)
         print(f"sb3-contrib: {rates['sb3-contrib']:.0f} steps/s", flush=True)
@@ -214,19 +236,33 @@ def main() -> None:
     rates["physics alone"] = 1 / phys
 
     print(f"\n{TASK}, {args.steps} env steps each, torch threads 1")
-    best = max(v for k, v in rates.items() if k.startswith("hrlp"))
-    print(f"{'':<18} {'steps/s':>10} {'hrlp / this':>12} {'best hrlp / this':>17}")
+    print(f"{'':<48} {'steps/s':>10} " + " ".join(f"{n[:12] + ' / this':>20}" for n in runs))
     for name, r in rates.items():
-        print(f"{name:<18} {r:>10.0f} {rates['hrlp'] / r:>11.2f}x {best / r:>16.2f}x")
-    print(f"hrlp time shares: env {hr['env']:.1%}, inference {hr['inference']:.1%}, update {hr['update']:.1%}")
-    print(f"hrlp mj_step share of wall: {hr['steps'] * phys / hr['wall']:.1%}")
+        print(f"{name:<48} {r:>10.0f} " + " ".join(f"{rates[n] / r:>19.2f}x" for n in runs))
+    for name, hr in runs.items():
+        cores = 1 if name == "hrlp" else 2
+        share = hr["steps"] * phys / (hr["wall"] * cores)
+        print(
+            f"{name}: time shares env {hr['env']:.1%}, inference {hr['inference']:.1%}, value fit {hr['value_fit']:.1%}, "
+            f"update {hr['update']:.1%}; mj_step share of {cores} core(s) x wall: {share:.1%}"
+        )
 
     if "arm" not in skip:
-        arm = hrlp_run(ARM_TASK, args.arm_steps, args.batch_steps, args.seed)
         aphys = arm_physics(args.physics_steps)
-        print(f"\n{ARM_TASK}, hrlp {arm['steps']} env steps: {arm['steps_per_s']:.0f} steps/s, physics alone {1 / aphys:.0f}")
-        print(f"hrlp time shares: env {arm['env']:.1%}, inference {arm['inference']:.1%}, update {arm['update']:.1%}")
-        print(f"hrlp mj_step share of wall: {arm['steps'] * aphys / arm['wall']:.1%} (physics {aphys * 1e6:.0f} us/step)")
+        for name, kw in (("hrlp", {}), (fast_name, fast)):
+            if name != "hrlp" and args.workers < 2:
+                continue
+            arm = hrlp_run(ARM_TASK, args.arm_steps, args.batch_steps, args.seed, **kw)
+            cores = 1 if name == "hrlp" else 2
+            print(
+                f"\n{ARM_TASK}, {name}, {arm['steps']} env steps: {arm['steps_per_s']:.0f} steps/s, physics alone "
+                f"{1 / aphys:.0f} per core ({aphys * 1e6:.0f} us/step)"
+            )
+            print(
+                f"time shares: env {arm['env']:.1%}, inference {arm['inference']:.1%}, value fit {arm['value_fit']:.1%}, "
+                f"update {arm['update']:.1%}; mj_step share of {cores} core(s) x wall: "
+                f"{arm['steps'] * aphys / (arm['wall'] * cores):.1%}"
+            )
 
     if "rss" not in skip:
         base = peak_rss_mib(args.rss_task, args.rss_batch, baseline=True)

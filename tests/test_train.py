@@ -1,5 +1,6 @@
 """The flat training loop end to end at tiny budgets: logs, checkpoints, evaluation, determinism, bad input."""
 
+import copy
 import csv
 import dataclasses
 import json
@@ -10,6 +11,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from hrlp.algos.value import fit_value
 from hrlp.checkpoint import load_checkpoint
 from hrlp.cli import app
 from hrlp.evaluate import evaluate_run, mean_interval, wilson_interval
@@ -26,7 +28,7 @@ def test_training_writes_logs_and_a_checkpoint_that_evaluates(tmp_path):
     for r in rows:
         assert 0 <= r["trpo/kl"] <= cfg.trpo.max_kl * 1.5
         assert r["episodes"] > 0 and math.isfinite(r["return_mean"]) and 0 <= r["success_rate"] <= 1
-        shares = r["time/env_share"] + r["time/inference_share"] + r["time/update_share"]
+        shares = sum(r[f"time/{k}_share"] for k in ("env", "inference", "value_fit", "update"))
         assert 0.5 < shares <= 1.0 + 1e-9
     with (tmp_path / "progress.csv").open() as f:
         logged = list(csv.DictReader(f))
@@ -53,6 +55,19 @@ def test_evaluation_uses_the_full_start_set_of_a_curriculum_run(tmp_path):
         angles.append(math.atan2(c[1], c[0]))
     assert max(abs(a) for a in angles) > 0.5
     env.close()
+
+
+def test_the_baseline_is_fitted_on_each_batch_during_the_next_iteration():
+    trainer = Trainer(TrainConfig(task="Reacher", **TINY))
+    first = trainer.iterate()
+    assert math.isnan(first["value/explained_variance_after"]) and trainer.pending_value_fit is not None
+    expected = copy.deepcopy(trainer.value_net)
+    vstats = fit_value(expected, *trainer.pending_value_fit, trainer.cfg.value)
+    second = trainer.iterate()  # fits the baseline on the first batch; nothing else changes it
+    for a, b in zip(trainer.value_net.parameters(), expected.parameters(), strict=True):
+        assert torch.equal(a, b)
+    assert second["value/explained_variance_after"] == vstats.explained_variance_after
+    trainer.sampler.close()
 
 
 def test_saved_policy_acts_like_the_trained_one(tmp_path):

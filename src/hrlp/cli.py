@@ -135,12 +135,18 @@ def reproduce(
 def tables(
     root: Annotated[Path, typer.Option(help="Root of the runs written by 'hrlp reproduce'.")] = Path("runs/reproduce"),
     out: Annotated[Path, typer.Option(help="Directory for the markdown tables and PNG plots.")] = Path("docs/results"),
+    threshold: Annotated[
+        list[float] | None,
+        typer.Option(help="Training success rate for the sample-efficiency table; repeatable (default 0.05, 0.1, 0.2)."),
+    ] = None,
+    window: Annotated[int, typer.Option(help="Iterations in the moving average of the training success rate.")] = 3,
 ) -> None:
-    """Rebuild the paper's tables (ours beside the paper's numbers) and learning curves from run directories."""
-    from hrlp.experiments.tables import build_tables
+    """Rebuild the paper's tables (ours beside the paper's numbers), learning curves, sweep scatter plots and
+    sample-efficiency tables from run directories."""
+    from hrlp.experiments.tables import DEFAULT_THRESHOLDS, build_tables
 
     try:
-        files = build_tables(root, out)
+        files = build_tables(root, out, thresholds=tuple(threshold) if threshold else DEFAULT_THRESHOLDS, window=window)
     except ValueError as e:
         raise _fail(str(e)) from None
     for f in files:
@@ -174,6 +180,9 @@ _TASK_ARG = Annotated[
 ]
 _WORKERS = Annotated[int, typer.Option(help="Processes sampling at the same time (e.g. one per core); 1: in this process.")]
 _INIT_LOG_STD = Annotated[float, typer.Option(help="Initial log std of the Gaussian action noise.")]
+_FISHER_FRACTION = Annotated[
+    float, typer.Option(help="Share of the batch the Fisher-vector products use (TRPO paper: 0.1; 1: exact, the default).")
+]
 _RESUME = Annotated[
     bool, typer.Option(help="Continue the run in --run-dir from its last checkpoint with its own settings (--steps may grow).")
 ]
@@ -192,13 +201,14 @@ def train(
     episode_steps: _EPISODE_STEPS = None,
     task_arg: _TASK_ARG = None,
     init_log_std: _INIT_LOG_STD = 0.0,
+    fisher_fraction: _FISHER_FRACTION = 1.0,
     workers: _WORKERS = 1,
     resume: _RESUME = False,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
     settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
                     episode_steps=episode_steps, init_log_std=init_log_std, workers=workers)  # fmt: skip
-    _train(settings, task_arg, max_kl, gamma, run_dir, resume, steps)
+    _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps)
 
 
 @app.command("train-manager")
@@ -223,6 +233,7 @@ def train_manager(
     episode_steps: _EPISODE_STEPS = None,
     task_arg: _TASK_ARG = None,
     init_log_std: _INIT_LOG_STD = 0.0,
+    fisher_fraction: _FISHER_FRACTION = 1.0,
     workers: _WORKERS = 1,
     resume: _RESUME = False,
 ) -> None:
@@ -237,7 +248,7 @@ def train_manager(
         raise _fail(str(e)) from None
     settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
                     episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec)  # fmt: skip
-    _train(settings, task_arg, max_kl, gamma, run_dir, resume, steps)
+    _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps)
 
 
 def parse_task_args(items: list[str] | None) -> dict[str, Any]:
@@ -256,7 +267,7 @@ def parse_task_args(items: list[str] | None) -> dict[str, Any]:
     return out
 
 
-def _train(settings: dict[str, Any], task_arg: list[str] | None, max_kl: float, gamma: float, run_dir: Path | None,
+def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: dict[str, float], run_dir: Path | None,
            resume: bool, steps: int | None) -> Path:  # fmt: skip
     """Shared body of ``train`` and ``train-manager``: build and check the config, then train with a progress bar."""
     import dataclasses
@@ -281,7 +292,7 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, max_kl: float, 
         else:
             if (out / "checkpoint").exists():
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
-            trpo = dataclasses.replace(TRPOConfig(), max_kl=max_kl, gamma=gamma)
+            trpo = TRPOConfig(**trpo_settings)
             cfg = TrainConfig(**settings, trpo=trpo, task_kwargs=parse_task_args(task_arg))
         env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
     except (ValueError, CheckpointError) as e:

@@ -1,4 +1,4 @@
-"""Learning curves from runs' ``progress.csv`` files (matplotlib, off-screen)."""
+"""Learning curves from runs' ``progress.csv`` files and scatters of hyperparameter sweeps (matplotlib, off-screen)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,12 @@ import os
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def read_progress(run_dir: Path) -> dict[str, np.ndarray]:
@@ -41,8 +45,7 @@ def plot_learning_curves(
     import matplotlib.pyplot as plt
     from matplotlib.ticker import EngFormatter
 
-    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
-        raise ValueError(f"plot file must end in .png, .pdf or .svg, got {out.name!r}")
+    _check_suffix(out)
     data = {label: [read_progress(r) for r in dirs] for label, dirs in runs.items()}
     fig, axes = plt.subplots(1, len(metrics), figsize=(5 * len(metrics), 3.6), squeeze=False)
     for ax, metric in zip(axes[0], metrics, strict=True):
@@ -63,6 +66,67 @@ def plot_learning_curves(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    return _save(fig, out)
+
+
+def plot_sweep(
+    groups: Sequence[tuple[float, Sequence[float]]],
+    out: Path,
+    xlabel: str,
+    ylabel: str,
+    log_x: bool = False,
+    title: str | None = None,
+) -> Path:
+    """A scatter of a hyperparameter sweep in the style of the paper's Figures 4, 8 and 10: one dot per training run.
+
+    ``groups`` holds ``(x, ys)`` pairs: the swept value of one preset run and its seeds' final metric values. Every
+    seed is a dot at ``x`` (slightly jittered sideways where seeds share a value, so none hide each other) and the
+    mean over the seeds is a horizontal bar. The figure is written atomically to ``out``; returns ``out``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    _check_suffix(out)
+    fig, ax = plt.subplots(figsize=(5, 3.6))
+    xs_all = [x for x, _ in groups]
+    for i, (x, ys) in enumerate(groups):
+        ys = [y for y in ys if math.isfinite(y)]
+        if not ys or not math.isfinite(x) or (log_x and x <= 0):
+            continue
+        jitter = np.linspace(-1, 1, len(ys)) if len(ys) > 1 else np.zeros(1)
+        px = x * 10 ** (0.04 * jitter) if log_x else x + jitter * _spacing(xs_all)  # 0.04 decades either side
+        ax.scatter(px, ys, s=22, color="C0", alpha=0.8, label="one run (seed)" if i == 0 else None, zorder=3)
+        ax.scatter([x], [float(np.mean(ys))], marker="_", s=400, linewidths=2, color="C3",
+                   label="mean over seeds" if i == 0 else None, zorder=4)  # fmt: skip
+    if log_x:
+        ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    return _save(fig, out)
+
+
+def _spacing(xs: Sequence[float]) -> float:
+    """Sideways room for jitter on a linear axis: 15% of the smallest gap between distinct x values (0.5 for one)."""
+    u = np.unique([x for x in xs if math.isfinite(x)])
+    return 0.5 if u.size < 2 else float(np.diff(u).min()) * 0.15
+
+
+def _check_suffix(out: Path) -> None:
+    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise ValueError(f"plot file must end in .png, .pdf or .svg, got {out.name!r}")
+
+
+def _save(fig: Figure, out: Path) -> Path:
+    """Write ``fig`` to ``out`` atomically (a temporary file in the same directory, then a rename) and close it."""
+    import matplotlib.pyplot as plt
+
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=out.suffix, dir=out.parent)
     os.close(fd)

@@ -99,11 +99,25 @@ class Sampler:
         self._len = np.zeros(n, dtype=np.int64)
         self.timing = Timing()
         self.last_raw_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations of the last batch
+        self._requested: int | None = None
 
     @property
     def num_envs(self) -> int:
         """N, the number of environments."""
         return len(self.envs)
+
+    def request(self, steps_per_env: int) -> None:
+        """Ask for a batch of ``steps_per_env`` steps per environment; :meth:`receive` samples and returns it.
+
+        The same two-call protocol as :class:`ParallelSampler`, whose workers sample in between."""
+        self._requested = steps_per_env
+
+    def receive(self) -> tuple[Batch, list[Episode]]:
+        """The batch asked for by :meth:`request`, sampled now."""
+        steps, self._requested = self._requested, None
+        if steps is None:
+            raise RuntimeError("receive() without a request()")
+        return self.collect(steps)
 
     def collect(self, steps_per_env: int) -> tuple[Batch, list[Episode]]:
         """Run ``steps_per_env`` steps in every environment; returns the batch and the episodes that finished."""
@@ -259,13 +273,30 @@ class ParallelSampler:
         for conn in self._conns:
             _receive(conn)  # each worker reports ready (or the error that stopped it)
         self.num_envs = len(env_fns)
+        self._pending = False
 
     def collect(self, steps_per_env: int) -> tuple[Batch, list[Episode]]:
         """Every worker samples ``steps_per_env`` steps of its environments at once; returns the joined batch."""
+        self.request(steps_per_env)
+        return self.receive()
+
+    def request(self, steps_per_env: int) -> None:
+        """Send the current weights and normaliser statistics and start every worker on its share of a batch.
+
+        Returns at once: this process is free (e.g. to fit the value function) until :meth:`receive`."""
+        if self._pending:
+            raise RuntimeError("request() while a batch is still being sampled; receive() it first")
         weights = {k: v.detach().cpu().numpy() for k, v in self.policy.state_dict().items()}
         stats = {k: v.numpy() for k, v in self.normalizer.state_dict().items()}
         for conn in self._conns:
             conn.send(("collect", (weights, stats, steps_per_env)))
+        self._pending = True
+
+    def receive(self) -> tuple[Batch, list[Episode]]:
+        """Wait for the batch started by :meth:`request`; returns it joined in environment order."""
+        if not self._pending:
+            raise RuntimeError("receive() without a request()")
+        self._pending = False
         parts = [_receive(conn) for conn in self._conns]
         fields = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated")
         joined = {f: torch.cat([p["batch"][f] for p in parts], dim=1) for f in fields}

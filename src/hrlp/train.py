@@ -177,14 +177,28 @@ class Trainer:
             self.sampler = Sampler(envs, self.policy, self.normalizer, seed=cfg.seed)
         self.iteration = 0
         self.env_steps = 0
+        self.pending_value_fit: tuple[torch.Tensor, torch.Tensor] | None = None
+        """``(obs [B, D], returns [B])`` of the last batch, which the baseline is fitted on in the next iteration."""
 
     def iterate(self) -> dict[str, float]:
-        """One iteration: collect, GAE, fit the baseline, TRPO step. Returns its statistics."""
+        """One iteration: collect, GAE, TRPO step; returns its statistics.
+
+        The baseline is fitted on each batch while the next batch is being sampled (the value function plays no
+        part in sampling, so the numbers are those of fitting it right after the TRPO step; with sampling
+        workers, the fit runs while they sample). The ``value/*`` statistics are those of the fit finished in
+        this iteration, on the previous batch (NaN in the first iteration).
+        """
         cfg = self.cfg
         t0 = time.perf_counter()
         timing = self.sampler.timing
         env0, inf0 = timing.env, timing.inference
-        batch, episodes = self.sampler.collect(cfg.steps_per_env)
+        self.sampler.request(cfg.steps_per_env)
+        vstats = None
+        if self.pending_value_fit is not None:
+            vstats = fit_value(self.value_net, *self.pending_value_fit, cfg.value)
+            self.pending_value_fit = None
+        t_fit = time.perf_counter() - t0
+        batch, episodes = self.sampler.receive()
         t1 = time.perf_counter()
         T, N, D = batch.obs.shape
         obs = batch.obs.reshape(T * N, D)
@@ -196,10 +210,12 @@ class Trainer:
         actions = batch.actions.reshape(T * N, *batch.actions.shape[2:])
         with torch.no_grad():
             old_dist = self.policy(obs)
+        stride = round(1 / cfg.trpo.fisher_fraction)
         stats = trpo_update(
-            list(self.policy.parameters()), lambda: self.policy(obs), old_dist, actions, adv.advantages.reshape(-1), cfg.trpo
-        )
-        vstats = fit_value(self.value_net, obs, adv.returns.reshape(-1), cfg.value)
+            list(self.policy.parameters()), lambda: self.policy(obs), old_dist, actions, adv.advantages.reshape(-1), cfg.trpo,
+            fisher_dist_fn=None if stride == 1 else lambda: self.policy(obs[::stride]),
+        )  # fmt: skip
+        self.pending_value_fit = (obs, adv.returns.reshape(-1).detach())
         t2 = time.perf_counter()
         self.iteration += 1
         self.env_steps += batch.env_steps
@@ -213,10 +229,11 @@ class Trainer:
             "success_rate": mean_or_nan([e.success for e in episodes]),
             "target_dist_sum": mean_or_nan([e.target_dist_sum for e in episodes]),
             **{f"trpo/{k}": float(v) for k, v in stats.to_dict().items()},
-            "value/explained_variance_before": vstats.explained_variance_before,
-            "value/explained_variance_after": vstats.explained_variance_after,
+            "value/explained_variance_before": math.nan if vstats is None else vstats.explained_variance_before,
+            "value/explained_variance_after": math.nan if vstats is None else vstats.explained_variance_after,
             "time/env_share": (timing.env - env0) / wall,
             "time/inference_share": (timing.inference - inf0) / wall,
+            "time/value_fit_share": t_fit / wall,
             "time/update_share": (t2 - t1) / wall,
             "time/steps_per_s": batch.env_steps / wall,
         }
@@ -232,6 +249,8 @@ class Trainer:
         tensors.update({f"normalizer.{k}": v for k, v in self.normalizer.state_dict().items()})
         rng_tensors, rng_meta = pack_generators({}, self._generators())
         tensors.update(rng_tensors)
+        if self.pending_value_fit is not None:
+            tensors["pending_value_fit.obs"], tensors["pending_value_fit.returns"] = self.pending_value_fit
         meta = {
             **rng_meta,
             "sampler": self.sampler.get_state(),
@@ -264,6 +283,8 @@ class Trainer:
         unpack_generators(tensors, meta, {}, trainer._generators())
         trainer.sampler.set_state(meta["sampler"])
         trainer.iteration, trainer.env_steps = int(meta["iteration"]), int(meta["env_steps"])
+        if "pending_value_fit.obs" in tensors:
+            trainer.pending_value_fit = (tensors["pending_value_fit.obs"], tensors["pending_value_fit.returns"])
         return trainer
 
     def _generators(self) -> dict[str, torch.Generator]:

@@ -57,6 +57,27 @@ def test_update_improves_surrogate_within_trust_region(kind):
     assert stats.cg_relative_residual < 0.5
 
 
+@pytest.mark.parametrize("kind", ["gaussian", "hierarchical"])
+def test_fisher_products_on_a_subsample(kind):
+    # The same states passed as the Fisher sample give exactly the full update.
+    policy, obs, old, actions, advantages = _problem(kind)
+    full = trpo_update(list(policy.parameters()), lambda: policy(obs), old, actions, advantages)
+    theta_full = get_flat_params(list(policy.parameters()))
+    policy, obs, old, actions, advantages = _problem(kind)
+    same = trpo_update(list(policy.parameters()), lambda: policy(obs), old, actions, advantages,
+                       fisher_dist_fn=lambda: policy(obs))  # fmt: skip
+    assert same == full and torch.equal(get_flat_params(list(policy.parameters())), theta_full)
+    # Every 4th state: a different step, still an improvement inside the exact trust region on every state.
+    policy, obs, old, actions, advantages = _problem(kind)
+    cfg = TRPOConfig(max_kl=0.01, fisher_fraction=0.25)
+    sub = trpo_update(list(policy.parameters()), lambda: policy(obs), old, actions, advantages, cfg,
+                      fisher_dist_fn=lambda: policy(obs[::4]))  # fmt: skip
+    assert sub != full and sub.accepted and sub.surrogate_after > sub.surrogate_before
+    assert 0.2 * cfg.max_kl < sub.kl <= cfg.max_kl * (1 + 1e-9)
+    with torch.no_grad():
+        assert old.kl(policy(obs)).mean().item() == pytest.approx(sub.kl, rel=1e-9)
+
+
 def test_only_the_given_parameters_move():
     """A frozen feature layer and the value net stay bit-identical; no .grad is left on anything."""
     torch.manual_seed(0)
@@ -154,6 +175,8 @@ def test_config_defaults_follow_the_paper():
         ("gamma", 1.5),
         ("gae_lambda", -0.1),
         ("entropy_coef", -0.01),
+        ("fisher_fraction", 0.0),
+        ("fisher_fraction", 1.5),
     ],
 )
 def test_config_validation(field, value):

@@ -196,6 +196,14 @@ class ArmPhysics:
         self.data.qpos[:N_JOINTS] = np.clip(qpos, self.joint_range[:, 0], self.joint_range[:, 1])
         self.data.qvel[:N_JOINTS] = 0.0 if qvel is None else qvel
 
+    def set_state_vectors(self, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        """Set every generalised position [nq] and velocity [nv]: the 9 hinges and the capsule's free joint."""
+        m = self.model
+        if np.shape(qpos) != (m.nq,) or np.shape(qvel) != (m.nv,):
+            raise ValueError(f"state vectors must have shapes ({m.nq},), ({m.nv},); got {np.shape(qpos)}, {np.shape(qvel)}")
+        self.data.qpos[:] = qpos
+        self.data.qvel[:] = qvel
+
     def set_capsule(self, pos: np.ndarray, yaw: float = 0.0) -> None:
         """Place the capsule lying on its side at ``pos`` with its axis at angle ``yaw`` in the xy-plane."""
         a = self._obj_qpos

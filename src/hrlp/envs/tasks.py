@@ -14,6 +14,7 @@ kinematics from random joint angles and rejected if the arm touches the table or
 from __future__ import annotations
 
 import abc
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -433,21 +434,37 @@ class ReachAndGripTask(Task):
 MOVER_VARIANTS = ("plain", "noised")
 
 
+#: Where ``MoverTask(starts="grip")`` draws its starts from (``scripts/make_mover_starts.py`` writes it).
+MOVER_STARTS_FILE = "assets/mover_starts.npz"
+MOVER_STARTS = ("grip", "placed")
+
+
+@functools.cache
+def grip_starts(variant: str) -> tuple[np.ndarray, np.ndarray]:
+    """The recorded ``(qpos [S, nq], qvel [S, nv])`` start states of the Mover ``variant`` (read without pickle)."""
+    from importlib import resources
+
+    with resources.files("hrlp.envs").joinpath(MOVER_STARTS_FILE).open("rb") as f, np.load(f, allow_pickle=False) as z:
+        return z[f"{variant}_qpos"].astype(np.float64), z[f"{variant}_qvel"].astype(np.float64)
+
+
 @dataclass(frozen=True)
 class MoverTask(Task):
-    """Mover (Section 4.1, Experiment 2): move the capsule to the target T, palm starting near it.
+    """Mover (Section 4.1, Experiment 2): move the capsule to the target T, palm starting close to it.
 
     Reward: -hand_coeff d(H, C) - target_coeff d(C, T). The target is appended to the
     observation (obs[24:27]); as a skill, it is the parameter the Manager passes.
-    Start sets:
-      - plain (small): capsule angle in [-0.2, 0.2] rad, H 5.5-6.5 cm above the capsule's centre
-        (within 1 cm horizontally), target 10 cm above the capsule's start, jittered by up to
-        2 cm per axis.
-      - noised (large): capsule anywhere on the circle, H 5-10 cm from the capsule's centre
-        (upper half-space), target 5-20 cm above the capsule's start (5-8 cm behind the arm,
-        |angle| > 2.2 rad, where the hand reaches only low points), shifted up to 8 cm
-        horizontally; targets the hand cannot reach are redrawn.
-    Closer hand starts put a finger inside the capsule, so 5 cm is the nearest clear start.
+    Start sets (``variant``): plain (small) has the capsule's angle within 0.2 rad of straight
+    ahead and the target 10 cm above the capsule, jittered by up to 2 cm per axis; noised (large)
+    has the capsule anywhere on the circle and the target 5-20 cm above it (5-8 cm behind the arm,
+    |angle| > 2.2 rad, where the hand reaches only low points), shifted up to 8 cm horizontally;
+    targets the hand cannot reach are redrawn. Where the palm starts (``starts``):
+      - grip (default): a physics state recorded along an episode in which the shipped Gripper
+        skill gripped the capsule (:mod:`hrlp.skills.starts`): the palm 0-9 cm from the capsule
+        with the claw opening, closing, or closed around it.
+      - placed: H 5.5-6.5 cm above the capsule's centre (plain; within 1 cm horizontally) or 5-10 cm
+        from it in the upper half-space (noised), the claw at rest. Closer hand starts put a finger
+        inside the capsule. From these starts a Mover never learned to grip (docs/skills.md).
     Success: d(C, T) < success_tol. Tracks d(C, T) so the episode's TargetDistSum is reported.
     """
 
@@ -459,12 +476,16 @@ class MoverTask(Task):
     """Weight of d(C, T)."""
     success_tol: float = 0.03
     """A step succeeds when d(C, T) is below this, metres."""
+    starts: str = "grip"
+    """'grip' (states along the Gripper skill's successful episodes) or 'placed' (hand placed by IK, claw at rest)."""
     extra_obs_dim = 3
     tracked = ("target_dist",)
 
     def __post_init__(self) -> None:
         if self.variant not in MOVER_VARIANTS:
             raise ValueError(f"MoverTask.variant must be one of {MOVER_VARIANTS}, got {self.variant!r}")
+        if self.starts not in MOVER_STARTS:
+            raise ValueError(f"MoverTask.starts must be one of {MOVER_STARTS}, got {self.starts!r}")
         _nonneg(self, "hand_coeff", "target_coeff")
         _positive(self, "success_tol")
 
@@ -473,29 +494,35 @@ class MoverTask(Task):
         return {"plain": "MoverPlain", "noised": "MoverNoised"}[self.variant]
 
     def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
-        if self.variant == "plain":
+        if self.starts == "grip":
+            qpos, qvel = grip_starts(self.variant)
+            i = int(rng.integers(len(qpos)))
+            physics.set_state_vectors(qpos[i], qvel[i])
+            physics.forward()
+            c = physics.capsule.copy()
+            angle = math.atan2(c[1] - BASE_AXIS_XY[1], c[0] - BASE_AXIS_XY[0])
+        elif self.variant == "plain":
             c = _place_capsule(physics, _angle(rng, 0.2))
-            hand = lambda: c + np.array([*rng.uniform(-0.01, 0.01, size=2), rng.uniform(0.055, 0.065)])  # noqa: E731
-            target = c + np.array([0.0, 0.0, 0.10]) + rng.uniform(-0.02, 0.02, size=3)
+            above = lambda: c + np.array([*rng.uniform(-0.01, 0.01, size=2), rng.uniform(0.055, 0.065)])  # noqa: E731
+            arm_with_hand_at(physics, rng, above)
         else:
             angle = _angle(rng, math.pi)
             c = _place_capsule(physics, angle)
-            hand = lambda: c + _upper_offset(rng, 0.05, 0.10, lift=0.3)  # noqa: E731
-            arm_with_hand_at(physics, rng, hand)
-            start = physics.qpos.copy()
-            # Behind the arm (|angle| > 2.2 rad) the hand reaches only low points (docs/environments.md).
-            top = 0.08 if abs(angle) > 2.2 else 0.20
-            for _ in range(50):  # targets the hand cannot reach are redrawn
-                target = c + np.array([*rng.uniform(-0.08, 0.08, size=2), rng.uniform(0.05, top)])
-                # IK warm-started from the hand's start pose (the target is near it) settles most draws at once.
-                if physics.solve_hand_ik(target, start, tol=0.005)[1] < 0.01 or is_reachable(physics, target, rng, tries=4):
-                    break
-            else:
-                raise StartError(f"no reachable target above the capsule at {np.round(c, 3).tolist()}")
-            physics.set_target(target)
+            arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, 0.05, 0.10, lift=0.3))
+        if self.variant == "plain":
+            physics.set_target(c + np.array([0.0, 0.0, 0.10]) + rng.uniform(-0.02, 0.02, size=3))
             return
+        start = physics.qpos.copy()
+        # Behind the arm (|angle| > 2.2 rad) the hand reaches only low points (docs/environments.md).
+        top = 0.08 if abs(angle) > 2.2 else 0.20
+        for _ in range(50):  # targets the hand cannot reach are redrawn
+            target = c + np.array([*rng.uniform(-0.08, 0.08, size=2), rng.uniform(0.05, top)])
+            # IK warm-started from the hand's start pose (the target is near it) settles most draws at once.
+            if physics.solve_hand_ik(target, start, tol=0.005)[1] < 0.01 or is_reachable(physics, target, rng, tries=4):
+                break
+        else:
+            raise StartError(f"no reachable target above the capsule at {np.round(c, 3).tolist()}")
         physics.set_target(target)
-        arm_with_hand_at(physics, rng, hand)
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
         return {

@@ -2,7 +2,10 @@
 
 For each preset with finished runs under ``ROOT/PRESET/RUN/sSEED/result.json``: a markdown table
 (per run: seeds, our mean with a 95% bootstrap interval across seeds, the paper's number, steps
-and wall time) and a PNG of the learning curves (mean over seeds with a min-max band).
+and wall time), a PNG of the learning curves (mean over seeds with a min-max band), for a
+hyperparameter sweep a scatter of one dot per run against the swept value (the paper's Figures 4,
+8 and 10), and for success presets a sample-efficiency table: the environment steps until the
+smoothed training success rate first reaches given thresholds, with right-censored seeds.
 """
 
 from __future__ import annotations
@@ -10,12 +13,19 @@ from __future__ import annotations
 import json
 import math
 from collections import defaultdict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from hrlp.experiments.presets import PRESETS
+
+DEFAULT_THRESHOLDS: tuple[float, ...] = (0.05, 0.1, 0.2)
+"""Training success rates whose first crossing the sample-efficiency table reports."""
+SMOOTHING_WINDOW = 3
+"""Iterations in the trailing average of the training success rate, so one lucky iteration does not count."""
 
 
 def bootstrap_interval(values: list[float], confidence: float = 0.95, seed: int = 0) -> tuple[float, float, float]:
@@ -48,14 +58,253 @@ def collect(root: Path) -> dict[str, dict[str, list[tuple[Path, dict[str, Any]]]
     return out
 
 
-def build_tables(root: Path, out: Path) -> list[Path]:
-    """Write ``out/PRESET.md`` and ``out/PRESET.png`` for every preset with results; returns the files written.
+# --- sweeps: one dot per run against the swept hyperparameter (Figures 4, 8 and 10) -----------------------------
+
+
+@dataclass(frozen=True)
+class SweepAxis:
+    """How a preset's swept hyperparameter is read from a run's config (``result.json["config"]``) and plotted."""
+
+    label: str
+    """The x-axis label."""
+    x: Callable[[dict[str, Any]], float]
+    """The swept value, from the run's full :meth:`TrainConfig.to_json` dict."""
+    log: bool = False
+    """Logarithmic x axis (the paper's Figures 8 and 10)."""
+
+
+#: Presets that sweep one hyperparameter, and where its value lives in the config.
+SWEEPS: dict[str, SweepAxis] = {
+    "reach-and-move-flat": SweepAxis("TargetCoeff", lambda c: c["task_kwargs"]["target_coeff"]),
+    # Figure 8's axis is 10^5 * alpha: the angle the curriculum reaches after 10^5 episodes.
+    "reach-and-grip-2-flat": SweepAxis("10⁵·α", lambda c: 1e5 * c["task_kwargs"]["curriculum_alpha"], log=True),
+    "reach-and-grip-2-flat-kl": SweepAxis("max KL", lambda c: c["trpo"]["max_kl"], log=True),
+    "manager-kl": SweepAxis("max KL", lambda c: c["trpo"]["max_kl"], log=True),
+    "manager-k": SweepAxis("macro-action length k", lambda c: c["macro"]["k"]),
+    "manager-size": SweepAxis("hidden layer width", lambda c: c["hidden"][0], log=True),
+}
+
+
+def sweep_x(preset: str, config: dict[str, Any]) -> float | None:
+    """The swept hyperparameter of ``preset`` in a run's config dict; None for a preset without a sweep or a config
+    that lacks the setting (e.g. a run written by an older preset)."""
+    axis = SWEEPS.get(preset)
+    if axis is None:
+        return None
+    try:
+        return float(axis.x(config))
+    except (KeyError, IndexError, TypeError):
+        return None
+
+
+# --- sample efficiency: steps until the training success rate first reaches a threshold ------------------------
+
+
+def smoothed_rate(rate: np.ndarray, episodes: np.ndarray | None = None, window: int = SMOOTHING_WINDOW) -> np.ndarray:
+    """The trailing average of a per-iteration rate over the last ``window`` iterations, shape ``[iterations]``.
+
+    With ``episodes`` (episodes finished per iteration) the average is weighted by them, i.e. it is the success rate
+    of all training episodes that ended in those iterations. Iterations without a finite rate (no episode ended) are
+    left out of their windows. The first ``window - 1`` entries are NaN: only full windows count.
+    """
+    if window < 1:
+        raise ValueError(f"window must be a positive number of iterations, got {window}")
+    rate = np.asarray(rate, dtype=float)
+    w = np.ones_like(rate) if episodes is None else np.asarray(episodes, dtype=float)
+    out = np.full(rate.shape, math.nan)
+    for i in range(window - 1, rate.size):
+        r, wi = rate[i - window + 1 : i + 1], w[i - window + 1 : i + 1]
+        ok = np.isfinite(r) & np.isfinite(wi) & (wi > 0)
+        if ok.any():
+            out[i] = float((r[ok] * wi[ok]).sum() / wi[ok].sum())
+    return out
+
+
+def steps_to_threshold(
+    env_steps: np.ndarray,
+    rate: np.ndarray,
+    threshold: float,
+    episodes: np.ndarray | None = None,
+    window: int = SMOOTHING_WINDOW,
+) -> float | None:
+    """``env_steps`` at the end of the first iteration whose :func:`smoothed_rate` is at least ``threshold``.
+
+    None if it never gets there: the run is right-censored at its last ``env_steps``.
+    """
+    hit = np.flatnonzero(smoothed_rate(rate, episodes, window) >= threshold)
+    return float(env_steps[hit[0]]) if hit.size else None
+
+
+def censored_median(values: Sequence[float], reached: Sequence[bool]) -> tuple[float, bool]:
+    """The median over seeds of a time-to-event where some seeds are right-censored, and whether it is exact.
+
+    ``values[i]`` is seed i's crossing step if ``reached[i]``, else its final step count (its true crossing step is
+    larger, if it ever comes). Returns the median of these values, a lower bound of the true median; it is exact when
+    the ``n // 2 + 1`` smallest true values are known, i.e. at least that many reached values lie at or below every
+    censoring point (each censored seed then lies above them, whatever its true value).
+    """
+    if len(values) != len(reached) or not values:
+        raise ValueError("need one reached flag per value, and at least one value")
+    v = np.asarray(values, dtype=float)
+    r = np.asarray(reached, dtype=bool)
+    first_censored = v[~r].min() if (~r).any() else math.inf
+    exact = int((v[r] <= first_censored).sum()) >= v.size // 2 + 1
+    return float(np.median(v)), exact
+
+
+class Crossing(NamedTuple):
+    """Steps to one threshold over a run's seeds; censored seeds count their final step count in ``steps``."""
+
+    steps: tuple[float, ...]
+    """Per seed: the crossing step, or the final step count where it never crossed."""
+    reached: tuple[bool, ...]
+    """Per seed: whether it crossed."""
+
+    @property
+    def n_reached(self) -> int:
+        """Seeds that reached the threshold."""
+        return sum(self.reached)
+
+    def median(self) -> tuple[float, bool]:
+        """:func:`censored_median`: the median over seeds (a lower bound unless the flag says exact)."""
+        return censored_median(self.steps, self.reached)
+
+    def cell(self) -> str:
+        """The table cell: mean [95% bootstrap interval] if every seed reached it, else the censored median."""
+        n = len(self.steps)
+        count = f"({self.n_reached}/{n})"
+        if self.n_reached == n:
+            m, lo, hi = bootstrap_interval(list(self.steps))
+            interval = "" if n == 1 else f" [{format_steps(lo)}, {format_steps(hi)}]"
+            return f"{format_steps(m)}{interval} {count}"
+        if self.n_reached:  # say where the others were censored: each never got there within its own steps
+            first_censored = min(s for s, r in zip(self.steps, self.reached, strict=True) if not r)
+            count = f"({self.n_reached}/{n}, rest > {format_steps(first_censored)})"
+        med, exact = self.median()
+        return f"median {format_steps(med)} {count}" if exact else f"≥ {format_steps(med)} {count}"
+
+
+def run_crossings(
+    logs: Sequence[dict[str, np.ndarray]], thresholds: Sequence[float], window: int = SMOOTHING_WINDOW
+) -> list[Crossing]:
+    """One :class:`Crossing` per threshold for the seeds' progress logs (:func:`hrlp.plots.read_progress`).
+
+    The rate is the column ``success_rate`` (training episodes), weighted by ``episodes`` where logged; a log without
+    ``success_rate`` never crosses.
+    """
+    out = []
+    for th in thresholds:
+        steps, reached = [], []
+        for lg in logs:
+            t = None
+            if "success_rate" in lg:
+                t = steps_to_threshold(lg["env_steps"], lg["success_rate"], th, lg.get("episodes"), window)
+            steps.append(float(lg["env_steps"][-1]) if t is None else t)
+            reached.append(t is not None)
+        out.append(Crossing(tuple(steps), tuple(reached)))
+    return out
+
+
+def speedup(manager: Crossing, flat: Crossing) -> tuple[float, str] | None:
+    """How many times fewer steps the Manager needs than the flat run (ratio of censored medians, flat / Manager).
+
+    Returns the ratio and its relation to the true ratio of medians: "=" if both medians are exact, ">=" if only the
+    Manager's is (the flat one is a lower bound), "<=" if only the flat one's is; None if neither is exact.
+    """
+    (m_man, man_exact), (m_flat, flat_exact) = manager.median(), flat.median()
+    if not (man_exact or flat_exact):
+        return None
+    rel = "=" if man_exact and flat_exact else ">=" if man_exact else "<="
+    return m_flat / m_man, rel
+
+
+def format_steps(v: float) -> str:
+    """Environment steps, short: 950, 12.5k, 3M."""
+    if not math.isfinite(v):
+        return "-"
+    if abs(v) >= 1e6:
+        return f"{v / 1e6:.3g}M"
+    if abs(v) >= 1e3:
+        return f"{v / 1e3:.3g}k"
+    return f"{v:.0f}"
+
+
+def sample_efficiency_lines(
+    runs: dict[str, tuple[bool, list[dict[str, np.ndarray]]]],
+    thresholds: Sequence[float] = DEFAULT_THRESHOLDS,
+    window: int = SMOOTHING_WINDOW,
+) -> list[str]:
+    """The markdown section of the sample-efficiency table: a row per run (``{name: (is_manager, seed logs)}``, in
+    table order) and, where the preset has both Managers and flat runs, a line per threshold comparing the best of
+    each by :func:`speedup`."""
+    pct = [f"{th:.0%}" if th * 100 == round(th * 100) else f"{th:g}" for th in thresholds]
+    lines = [
+        "## Sample efficiency",
+        "",
+        f"Environment steps until the training success rate, averaged over the last {window} iterations (weighted by "
+        "episodes), first reaches each threshold. A cell is the mean over seeds with a 95% bootstrap interval when "
+        "every seed got there; otherwise a seed that never got there counts as right-censored at its final step count "
+        "and the cell is the median over seeds: `median X` when the censored seeds cannot change it, `≥ X` (a lower "
+        "bound) when they can. (r/n): seeds that reached the threshold; `rest > Y`: the others never did within Y steps.",
+        "",
+        "| run | kind | seeds | " + " | ".join(f"steps to {p}" for p in pct) + " |",
+        "|---|---|---:|" + "---|" * len(thresholds),
+    ]
+    crossings = {name: run_crossings(logs, thresholds, window) for name, (_, logs) in runs.items()}
+    for name, (is_manager, logs) in runs.items():
+        cells = " | ".join(c.cell() for c in crossings[name])
+        lines.append(f"| {name} | {'Manager' if is_manager else 'flat'} | {len(logs)} | {cells} |")
+    managers = [n for n, (m, _) in runs.items() if m]
+    flats = [n for n, (m, _) in runs.items() if not m]
+    if managers and flats:
+        lines += [
+            "",
+            "Best Manager against best flat run, by median steps over seeds. The Manager is the one with the smallest "
+            "known median (lower bounds only where no Manager run has one), the flat run the one with the smallest median "
+            "or lower bound, so censoring never inflates the ratio:",
+            "",
+        ]
+        for i, p in enumerate(pct):
+            man = min(managers, key=lambda n: (not crossings[n][i].median()[1], crossings[n][i].median()[0]))
+            flat = min(flats, key=lambda n: crossings[n][i].median()[0])
+            cm, cf = crossings[man][i], crossings[flat][i]
+            desc = f"`{man}` {_median_cell(cm)} vs `{flat}` {_median_cell(cf)}"
+            s = speedup(cm, cf)
+            if s is None:
+                verdict = "undetermined (neither median is reached by enough seeds)"
+            else:
+                ratio, rel = s
+                word = {"=": "", ">=": "at least ", "<=": "at most "}[rel]
+                verdict = f"the Manager needs {word}{ratio:.3g}x fewer environment steps"
+            lines.append(f"- success {p}: {desc}: {verdict}.")
+    return lines
+
+
+def _median_cell(c: Crossing) -> str:
+    med, exact = c.median()
+    return f"{'' if exact else '≥ '}{format_steps(med)} ({c.n_reached}/{len(c.steps)})"
+
+
+def build_tables(
+    root: Path,
+    out: Path,
+    thresholds: Sequence[float] = DEFAULT_THRESHOLDS,
+    window: int = SMOOTHING_WINDOW,
+) -> list[Path]:
+    """Write ``out/PRESET.md`` and ``out/PRESET.png`` for every preset with results, and ``out/PRESET_scatter.png`` for
+    presets that sweep a hyperparameter (:data:`SWEEPS`); returns the files written.
 
     Each run's cell is the mean over seeds with a 95% percentile-bootstrap interval across seeds; a run with a
-    single seed shows that run's own interval over its evaluation episodes (Wilson for success).
+    single seed shows that run's own interval over its evaluation episodes (Wilson for success). Presets whose
+    metric is success also get a sample-efficiency table (:func:`sample_efficiency_lines`) at ``thresholds`` of the
+    training success rate, smoothed over ``window`` iterations.
     """
-    from hrlp.plots import plot_learning_curves
+    from hrlp.plots import plot_learning_curves, read_progress
 
+    if not thresholds or not all(0 < th <= 1 for th in thresholds):
+        raise ValueError(f"success thresholds must lie in (0, 1], got {list(thresholds)}")
+    if window < 1:
+        raise ValueError(f"the smoothing window must be at least 1 iteration, got {window}")
     data = collect(root)
     if not data:
         raise ValueError(f"no finished runs (result.json) under {root}; run 'hrlp reproduce PRESET' first")
@@ -65,12 +314,17 @@ def build_tables(root: Path, out: Path) -> list[Path]:
         preset = PRESETS.get(preset_name)
         metric = preset.metric if preset else "success"
         order = [r.name for r in preset.runs if r.name in runs] if preset else sorted(runs)
+        axis = SWEEPS.get(preset_name)
         lines = [
             f"# {preset_name}" + (f": {preset.description} ({preset.source})" if preset else ""),
             "",
             f"Metric: {metric.replace('_', ' ')} (mean over seeds, 95% bootstrap interval across seeds; for a single "
             "seed, that run's own 95% interval over its evaluation episodes). "
             f"Rebuild: `hrlp tables --root {root} --out {out}`.",
+            "",
+            f"Figures: `{preset_name}.png` (learning curves)"
+            + (f", `{preset_name}_scatter.png` (the metric against {axis.label}, one dot per seed)" if axis else "")
+            + ".",
             "",
             "| run | seeds | ours | paper | env steps per run | wall time (h, all seeds) |",
             "|---|---:|---|---:|---:|---:|",
@@ -88,10 +342,37 @@ def build_tables(root: Path, out: Path) -> list[Path]:
             steps_cell = ", ".join(f"{s:,}" for s in steps)
             ours = f"{m:.3g} [{lo:.3g}, {hi:.3g}]"
             lines.append(f"| {name} | {len(results)} | {ours} | {paper_cell} | {steps_cell} | {wall:.2f} |")
+        if metric == "success":
+            logs = {
+                name: (runs[name][0][1]["config"].get("macro") is not None, [read_progress(d) for d, _ in runs[name]])
+                for name in order
+            }
+            lines += ["", *sample_efficiency_lines(logs, thresholds, window)]
         md = out / f"{preset_name}.md"
         md.write_text("\n".join(lines) + "\n")
         written.append(md)
         curves = {name: [d for d, _ in runs[name]] for name in order}
         metrics = ("success_rate", "return_mean") if metric == "success" else ("target_dist_sum", "return_mean")
         written.append(plot_learning_curves(curves, out / f"{preset_name}.png", metrics=metrics, title=preset_name))
+        if axis is not None and (scatter := _sweep_scatter(preset_name, axis, metric, [runs[n] for n in order], out)):
+            written.append(scatter)
     return written
+
+
+def _sweep_scatter(
+    preset_name: str, axis: SweepAxis, metric: str, runs: list[list[tuple[Path, dict[str, Any]]]], out: Path
+) -> Path | None:
+    """``out/PRESET_scatter.png``: every seed's final ``metric`` at its run's swept value; None if no run has both."""
+    from hrlp.plots import plot_sweep
+
+    groups = []
+    for seeds in runs:
+        xs = {sweep_x(preset_name, r["config"]) for _, r in seeds}
+        ys = [v for v in (metric_value(r, metric) for _, r in seeds) if v is not None]
+        x = xs.pop() if len(xs) == 1 else None
+        if x is not None and ys:
+            groups.append((x, ys))
+    if not groups:
+        return None
+    ylabel = {"success": "success rate (Definition 1)", "target_dist_sum": "TargetDistSum"}.get(metric, metric)
+    return plot_sweep(groups, out / f"{preset_name}_scatter.png", axis.label, ylabel, axis.log, preset_name)

@@ -1,0 +1,108 @@
+"""Start states recorded from a frozen skill's rollouts: the Mover's "palm close to the capsule" starts.
+
+The paper trains the Mover from starts with the palm close to the capsule (Section 4.1, Experiment 2). On this arm a
+Mover trained from hand-placed starts (claw at rest, 5-6.5 cm above the capsule) never learns to grip, and so never
+moves the capsule (docs/skills.md). :func:`record_grip_starts` runs the shipped Gripper skill from the Gripper task's
+close, open-claw starts and keeps the physics states of the episodes in which it grips the capsule, from their first
+step to their last: states on the way to a grip, and gripped ones. ``MoverTask(starts="grip")`` draws from them.
+
+The states are stored as plain float arrays in an ``.npz`` file read with ``allow_pickle=False``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from hrlp.envs import make
+from hrlp.skills.skill import Skill
+
+#: The Gripper task arguments of the shipped Gripper skill's training starts (scripts/train_shipped_skills.sh).
+GRIP_START_TASK_ARGS: dict[str, object] = {"start_distance": (0.0, 0.09), "finger_opening": (0.0, 1.0)}
+
+
+def record_grip_starts(
+    gripper: Skill,
+    angle_range: float,
+    states: int,
+    *,
+    seed: int = 0,
+    every: int = 5,
+    episode_steps: int = 100,
+    num_envs: int = 16,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Physics states ``(qpos [states, nq], qvel [states, nv])`` along the ``gripper``'s successful Gripper episodes.
+
+    Episodes start from the Gripper task's close, open-claw starts with the capsule's angle in
+    ``[-angle_range, angle_range]``; the skill acts with its mean action. Every ``every``-th state of an episode in
+    which Definition 1 held at some step is kept, until ``states`` are collected. ``progress(kept, episodes)`` is
+    called after every finished episode.
+    """
+    if states < 1 or every < 1 or episode_steps < 1 or num_envs < 1:
+        raise ValueError("states, every, episode_steps and num_envs must be positive integers")
+    if not 0 <= angle_range <= math.pi:
+        raise ValueError(f"angle_range must be in [0, pi], got {angle_range}")
+    envs = [
+        make("Gripper", episode_steps=episode_steps, angle_range=angle_range, **GRIP_START_TASK_ARGS) for _ in range(num_envs)
+    ]
+    obs = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(envs)])
+    traj: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in envs]
+    gripped = [False] * num_envs
+    kept_q: list[np.ndarray] = []
+    kept_v: list[np.ndarray] = []
+    episodes = 0
+    steps = [0] * num_envs
+    while len(kept_q) < states:
+        for i, env in enumerate(envs):
+            if steps[i] % every == 0:
+                d = env.unwrapped.physics.data
+                traj[i].append((d.qpos.copy(), d.qvel.copy()))
+        actions = gripper.act(obs, np.zeros((num_envs, 0)))
+        for i, env in enumerate(envs):
+            o, _, term, trunc, info = env.step(actions[i])
+            steps[i] += 1
+            gripped[i] = gripped[i] or bool(info["success"])
+            if term or trunc:
+                if gripped[i]:
+                    kept_q.extend(q for q, _ in traj[i])
+                    kept_v.extend(v for _, v in traj[i])
+                episodes += 1
+                if progress is not None:
+                    progress(min(len(kept_q), states), episodes)
+                traj[i], gripped[i], steps[i] = [], False, 0
+                o, _ = env.reset()
+            obs[i] = o
+    for env in envs:
+        env.close()
+    return np.stack(kept_q[:states]), np.stack(kept_v[:states])
+
+
+def write_start_bank(path: Path, banks: dict[str, tuple[np.ndarray, np.ndarray]], meta: dict[str, str]) -> Path:
+    """Write ``{name: (qpos, qvel)}`` as ``NAME_qpos``/``NAME_qvel`` float32 arrays plus string ``meta`` (atomic)."""
+    path = Path(path)
+    arrays: dict[str, np.ndarray] = {}
+    for name, (q, v) in banks.items():
+        arrays[f"{name}_qpos"], arrays[f"{name}_qvel"] = q.astype(np.float32), v.astype(np.float32)
+    arrays.update({f"meta_{k}": np.array(str(v)) for k, v in meta.items()})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez_compressed(f, **arrays)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+__all__ = ["GRIP_START_TASK_ARGS", "record_grip_starts", "write_start_bank"]
