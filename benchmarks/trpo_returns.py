@@ -5,6 +5,7 @@ Each library trains one policy per seed; every final policy is then scored on th
 (Student t over seeds) per library. One torch thread.
 
     python benchmarks/trpo_returns.py [--steps 200000] [--seeds 3] [--batch-steps 5000] [--episodes 20]
+                                      [--hrlp default|fastest]
 """
 
 from __future__ import annotations
@@ -50,13 +51,28 @@ def sb3_score(steps: int, seed: int, episodes: int) -> tuple[float, float]:
     return evaluate(lambda o: model.predict(o, deterministic=True)[0], episodes), wall
 
 
-def hrlp_score(steps: int, seed: int, episodes: int, batch_steps: int, num_envs: int) -> tuple[float, float]:
+#: hrlp settings compared: its defaults, and benchmarks/trpo_speed.py's fastest (2 sampling workers, Fisher-vector
+#: products on 10% of the batch, 64 environments, 10 L-BFGS iterations for the baseline).
+HRLP_SETTINGS = {
+    "default": {},
+    "fastest": {"workers": 2, "num_envs": 64, "fisher_fraction": 0.1, "value_iters": 10},
+}
+
+
+def hrlp_score(steps: int, seed: int, episodes: int, batch_steps: int, num_envs: int, settings: str = "default"
+               ) -> tuple[float, float]:  # fmt: skip
+    from hrlp.algos.trpo import TRPOConfig
+    from hrlp.algos.value import ValueFitConfig
     from hrlp.train import TrainConfig, Trainer
 
-    trainer = Trainer(TrainConfig(task=TASK, steps=steps, batch_steps=batch_steps, num_envs=num_envs, seed=seed))
+    kw = dict(HRLP_SETTINGS[settings])
+    trpo = TRPOConfig(fisher_fraction=kw.pop("fisher_fraction", 1.0))
+    value = ValueFitConfig(max_iter=kw.pop("value_iters", 25))
+    kw.setdefault("num_envs", num_envs)
+    trainer = Trainer(TrainConfig(task=TASK, steps=steps, batch_steps=batch_steps, seed=seed, trpo=trpo, value=value, **kw))
     t = time.perf_counter()
     try:
-        while trainer.iteration < trainer.cfg.iterations:
+        while trainer.env_steps < trainer.cfg.steps:
             trainer.iterate()
     finally:
         trainer.sampler.close()
@@ -87,11 +103,12 @@ def main() -> None:
     ap.add_argument("--num-envs", type=int, default=16, help="hrlp environments stepped together")
     ap.add_argument("--episodes", type=int, default=20, help="evaluation episodes per final policy")
     ap.add_argument("--libs", default="hrlp,sb3", help="comma-separated subset of hrlp,sb3")
+    ap.add_argument("--hrlp", choices=list(HRLP_SETTINGS), default="default", help="hrlp's settings (see HRLP_SETTINGS)")
     args = ap.parse_args()
     torch.set_num_threads(1)
 
     runners = {
-        "hrlp": lambda s: hrlp_score(args.steps, s, args.episodes, args.batch_steps, args.num_envs),
+        "hrlp": lambda s: hrlp_score(args.steps, s, args.episodes, args.batch_steps, args.num_envs, args.hrlp),
         "sb3": lambda s: sb3_score(args.steps, s, args.episodes),
     }
     scores: dict[str, list[float]] = {}

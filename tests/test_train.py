@@ -124,10 +124,12 @@ def test_cli_rejects_bad_input_before_any_compute(tmp_path):
         (["train", "NoSuchTask"], "unknown task"),
         (["train", "Reacher", "--max-kl", "-0.1"], "max_kl"),
         (["train", "Reacher", "--batch-steps", "0"], "batch_steps"),
+        (["train", "Reacher", "--fisher-fraction", "0"], "fisher_fraction"),
+        (["train-manager", "ReachAndGrip2", "--skills", "gripper", "--value-iters", "0"], "max_iter"),
         (["train", "hrlp_test/MultiDiscreteAction-v0"], "unsupported action space"),
         (["eval", str(tmp_path / "missing")], "no checkpoint"),
     ):
-        result = runner.invoke(app, [*args, "--run-dir", str(tmp_path / "r")] if args[0] == "train" else args)
+        result = runner.invoke(app, [*args, "--run-dir", str(tmp_path / "r")] if args[0].startswith("train") else args)
         assert result.exit_code == 2, (args, result.output)
         assert message in result.output
     assert not (tmp_path / "r").exists()

@@ -180,6 +180,7 @@ _TASK_ARG = Annotated[
 ]
 _WORKERS = Annotated[int, typer.Option(help="Processes sampling at the same time (e.g. one per core); 1: in this process.")]
 _INIT_LOG_STD = Annotated[float, typer.Option(help="Initial log std of the Gaussian action noise.")]
+_VALUE_ITERS = Annotated[int, typer.Option(help="L-BFGS iterations of the baseline fit per iteration (modular_rl: 25).")]
 _FISHER_FRACTION = Annotated[
     float, typer.Option(help="Share of the batch the Fisher-vector products use (TRPO paper: 0.1; 1: exact, the default).")
 ]
@@ -202,12 +203,14 @@ def train(
     task_arg: _TASK_ARG = None,
     init_log_std: _INIT_LOG_STD = 0.0,
     fisher_fraction: _FISHER_FRACTION = 1.0,
+    value_iters: _VALUE_ITERS = 25,
     workers: _WORKERS = 1,
     resume: _RESUME = False,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
     settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
-                    episode_steps=episode_steps, init_log_std=init_log_std, workers=workers)  # fmt: skip
+                    episode_steps=episode_steps, init_log_std=init_log_std, workers=workers,
+                    value_iters=value_iters)  # fmt: skip
     _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps)
 
 
@@ -234,6 +237,7 @@ def train_manager(
     task_arg: _TASK_ARG = None,
     init_log_std: _INIT_LOG_STD = 0.0,
     fisher_fraction: _FISHER_FRACTION = 1.0,
+    value_iters: _VALUE_ITERS = 25,
     workers: _WORKERS = 1,
     resume: _RESUME = False,
 ) -> None:
@@ -247,7 +251,8 @@ def train_manager(
     except ValueError as e:
         raise _fail(str(e)) from None
     settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
-                    episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec)  # fmt: skip
+                    episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec,
+                    value_iters=value_iters)  # fmt: skip
     _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps)
 
 
@@ -273,6 +278,7 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
     import dataclasses
 
     from hrlp.algos.trpo import TRPOConfig
+    from hrlp.algos.value import ValueFitConfig
     from hrlp.checkpoint import CheckpointError
     from hrlp.train import TrainConfig, env_factory, train_with_progress
 
@@ -293,7 +299,8 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
             if (out / "checkpoint").exists():
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
             trpo = TRPOConfig(**trpo_settings)
-            cfg = TrainConfig(**settings, trpo=trpo, task_kwargs=parse_task_args(task_arg))
+            value = ValueFitConfig(max_iter=settings.pop("value_iters"))
+            cfg = TrainConfig(**settings, trpo=trpo, value=value, task_kwargs=parse_task_args(task_arg))
         env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
