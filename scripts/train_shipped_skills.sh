@@ -2,7 +2,7 @@
 # Trains the skills shipped in src/hrlp/skills/pretrained/ with hrlp's own commands, then adds
 # them to that library. Each skill's manifest (`hrlp skills show NAME`) records the full training
 # config, seed and step count. On this machine (one core per run): Reacher about 8 minutes,
-# Gripper about 25, each Reacher variant about 5.
+# Gripper about 25, each Reacher variant about 5, the Mover about 25.
 #
 #   bash scripts/train_shipped_skills.sh [runs/skills]
 set -euo pipefail
@@ -29,7 +29,14 @@ hrlp train Reacher3D --steps 2000000 --batch-steps 25000 --seed 0 --run-dir "$ou
 hrlp train ReacherStabilised --steps 2000000 --batch-steps 25000 --seed 0 --task-arg level_coeff=0.1 \
   --run-dir "$out/reacher_stabilised"
 
+# Mover (MoverNoised): from states recorded along the shipped Gripper's successful episodes
+# (the task's default starts="grip"; `python scripts/make_mover_starts.py` records them again
+# after the Gripper changes), 100-step episodes, less initial action noise.
+hrlp train MoverNoised --steps 8000000 --batch-steps 25000 --episode-steps 100 --init-log-std -1 --seed 0 \
+  --run-dir "$out/mover_noised"
+
 hrlp skills add "$out/reacher" --name reacher --k 15 --library "$lib" --overwrite
 hrlp skills add "$out/reacher3d" --name reacher3d --k 15 --library "$lib" --overwrite
 hrlp skills add "$out/reacher_stabilised" --name s-reacher --k 15 --library "$lib" --overwrite
 hrlp skills add "$out/gripper" --name gripper --k 15 --library "$lib" --overwrite
+hrlp skills add "$out/mover_noised" --name mover-noised --k 8 --library "$lib" --overwrite

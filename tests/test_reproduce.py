@@ -9,7 +9,7 @@ from hrlp.cli import app
 from hrlp.experiments.presets import PRESETS, Preset, Run
 from hrlp.experiments.runner import plan, reproduce
 from hrlp.experiments.tables import bootstrap_interval, build_tables
-from hrlp.train import TrainConfig
+from hrlp.train import TrainConfig, env_factory
 
 
 def _tiny(name="tiny"):
@@ -23,6 +23,15 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
         assert len({r.name for r in p.runs}) == len(p.runs), p.name
         for job in plan(p, __import__("pathlib").Path("out")):
             assert job.config.steps == p.budget and job.config.seed in p.seeds
+    # Every environment a preset trains in can be built: its task arguments are valid and its skills are shipped.
+    built = set()
+    for p in PRESETS.values():
+        for r in p.runs:
+            c = r.config
+            key = (c.task, c.macro, json.dumps(c.task_kwargs, sort_keys=True), c.episode_steps)
+            if key not in built:
+                env_factory(c.task, c.episode_steps, c.macro, c.trpo.gamma, **c.task_kwargs)().close()
+                built.add(key)
     fig7 = {r.name: r.paper for r in PRESETS["reach-and-grip-2"].runs}
     assert fig7["gripper+micro,c2=3,tr=0.03"] == 0.86 and fig7["gripper+s-reacher,c2=4,tr=0.06"] == 0.70
 

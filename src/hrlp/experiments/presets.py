@@ -139,6 +139,16 @@ PRESETS: dict[str, Preset] = {
             metric="target_dist_sum",
         ),
         Preset(
+            "reach-and-move",
+            "reach-and-move, Manager over each Reacher with the shipped Mover (mover-noised), k = 8",
+            "Section 4.2.2, Figure 5",
+            tuple(
+                Run(f"{reacher}+mover-noised", _manager("ReachAndMove", (reacher, "mover-noised"), 8), paper)
+                for reacher, paper in (("reacher", -42.239), ("s-reacher", -41.470), ("reacher3d", -55.369))
+            ),
+            metric="target_dist_sum",
+        ),
+        Preset(
             "reach-and-grip-1",
             "reach-and-grip Experiment 1 (capsule fixed), Manager over gripper + reacher, k = 10",
             "Section 4.3.1, Experiment 1",
