@@ -2,7 +2,7 @@
 # Trains the skills shipped in src/hrlp/skills/pretrained/ with hrlp's own commands, then adds
 # them to that library. Each skill's manifest (`hrlp skills show NAME`) records the full training
 # config, seed and step count. On this machine (one core per run): Reacher about 8 minutes,
-# Gripper about 25, each Reacher variant about 5, the Mover about 25.
+# Gripper about 25, each Reacher variant about 5, each Mover about 25.
 #
 #   bash scripts/train_shipped_skills.sh [runs/skills]
 set -euo pipefail
@@ -34,9 +34,13 @@ hrlp train ReacherStabilised --steps 2000000 --batch-steps 25000 --seed 0 --task
 # after the Gripper changes), 100-step episodes, less initial action noise.
 hrlp train MoverNoised --steps 8000000 --batch-steps 25000 --episode-steps 100 --init-log-std -1 --seed 0 \
   --run-dir "$out/mover_noised"
+# MoverPlain, the same way; it stays weak (docs/skills.md) and ships for Figure 5's grid.
+hrlp train MoverPlain --steps 8000000 --batch-steps 25000 --episode-steps 100 --init-log-std -1 --seed 0 \
+  --run-dir "$out/mover_plain"
 
 hrlp skills add "$out/reacher" --name reacher --k 15 --library "$lib" --overwrite
 hrlp skills add "$out/reacher3d" --name reacher3d --k 15 --library "$lib" --overwrite
 hrlp skills add "$out/reacher_stabilised" --name s-reacher --k 15 --library "$lib" --overwrite
 hrlp skills add "$out/gripper" --name gripper --k 15 --library "$lib" --overwrite
 hrlp skills add "$out/mover_noised" --name mover-noised --k 8 --library "$lib" --overwrite
+hrlp skills add "$out/mover_plain" --name mover-plain --k 8 --library "$lib" --overwrite
