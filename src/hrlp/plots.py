@@ -8,7 +8,7 @@ import os
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -58,11 +58,8 @@ def plot_learning_curves(
             (line,) = ax.plot(grid, ys.mean(0), label=f"{label} ({len(logs)} run{'s' * (len(logs) > 1)})")
             if len(logs) > 1:
                 ax.fill_between(grid, ys.min(0), ys.max(0), color=line.get_color(), alpha=0.2)
-        ax.set_xlabel("environment steps")
         ax.xaxis.set_major_formatter(EngFormatter())
-        ax.set_ylabel(metric.replace("_", " "))
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        _label_axes(ax, "environment steps", metric.replace("_", " "))
     if title:
         fig.suptitle(title)
     fig.tight_layout()
@@ -102,14 +99,19 @@ def plot_sweep(
                    label="mean over seeds" if i == 0 else None, zorder=4)  # fmt: skip
     if log_x:
         ax.set_xscale("log")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    _label_axes(ax, xlabel, ylabel)
     if title:
         ax.set_title(title)
     fig.tight_layout()
     return _save(fig, out)
+
+
+def _label_axes(ax: Any, xlabel: str, ylabel: str) -> None:
+    """Axis labels, a light grid and a small legend: the style every hrlp plot shares."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
 
 
 def _spacing(xs: Sequence[float]) -> float:
