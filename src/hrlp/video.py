@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from rich.console import Console
+
+from hrlp.atomic import atomic_path
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
@@ -44,14 +44,8 @@ def write_video(path: Path, frames: Iterable[np.ndarray], fps: int) -> int:
     import imageio.v2 as imageio
 
     check_video_path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file the usual permissions
     n = 0
-    try:
+    with atomic_path(path) as tmp:
         if path.suffix.lower() == ".mp4":
             writer = imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=8)
         else:
@@ -60,12 +54,6 @@ def write_video(path: Path, frames: Iterable[np.ndarray], fps: int) -> int:
             for frame in frames:
                 writer.append_data(frame)
                 n += 1
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return n
 
 

@@ -9,9 +9,7 @@ runs. Every job trains in its own process with one torch thread.
 from __future__ import annotations
 
 import json
-import os
 import re
-import tempfile
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -19,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hrlp.atomic import atomic_path
 from hrlp.experiments.presets import PRESETS, Preset
 from hrlp.train import TrainConfig
 
@@ -102,10 +101,8 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=".result.", suffix=".json", dir=path.parent)
-    with os.fdopen(fd, "w") as f:
+    with atomic_path(path) as tmp, open(tmp, "w") as f:
         json.dump(data, f, indent=2)
-    os.replace(tmp, path)
 
 
 def reproduce(

@@ -12,13 +12,12 @@ The states are stored as plain float arrays in an ``.npz`` file read with ``allo
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from hrlp.atomic import atomic_path
 from hrlp.envs import make
 from hrlp.skills.skill import Skill
 
@@ -90,18 +89,8 @@ def write_start_bank(path: Path, banks: dict[str, tuple[np.ndarray, np.ndarray]]
     for name, (q, v) in banks.items():
         arrays[f"{name}_qpos"], arrays[f"{name}_qvel"] = q.astype(np.float32), v.astype(np.float32)
     arrays.update({f"meta_{k}": np.array(str(v)) for k, v in meta.items()})
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **arrays)
     return path
 
 

@@ -9,14 +9,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import pathlib
-import uuid
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from hrlp.atomic import atomic_path
 from hrlp.theory.exact import pair_quantities
 from hrlp.theory.gaussian import GaussianHierarchical
 from hrlp.theory.mdp import FiniteMDP, HierarchicalActionSpace, HierarchicalPolicy
@@ -176,16 +175,9 @@ def counterexample_to_json(counterexample: Counterexample) -> dict[str, Any]:
 def save_counterexample(counterexample: Counterexample, path: pathlib.Path) -> pathlib.Path:
     """Write ``counterexample`` to ``path`` as JSON, atomically (temporary file, then ``os.replace``)."""
     path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(counterexample_to_json(counterexample), indent=1, allow_nan=False)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
-    try:
-        with open(tmp, "x", encoding="utf-8") as f:
-            f.write(text + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp:
+        tmp.write_text(text + "\n", encoding="utf-8")
     return path
 
 
