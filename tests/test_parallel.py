@@ -27,6 +27,10 @@ def test_workers_sample_the_same_environments_as_one_process():
         assert len(e1) == len(e2) == 4  # episodes of 20 steps
         assert par.normalizer.count == pytest.approx(120)  # updated here with every raw observation
         assert not torch.equal(b1.actions, b2.actions)
+        # Time inside mj_step is counted in every environment, the workers' summed: part of the time stepping them.
+        for sampler in (one, par):
+            assert 0 < sampler.timing.physics < sampler.timing.env * 2
+        assert 0 < one.timing.physics < one.timing.env
     finally:
         one.close()
         par.close()

@@ -16,6 +16,7 @@ from hrlp.checkpoint import load_checkpoint
 from hrlp.cli import app
 from hrlp.evaluate import evaluate_run, mean_interval, wilson_interval
 from hrlp.rollout import Sampler
+from hrlp.skills.macro_env import MacroSpec
 from hrlp.train import TrainConfig, Trainer, env_factory, load_policy, load_trained, train
 
 TINY = {"steps": 400, "batch_steps": 200, "num_envs": 4, "episode_steps": 30}
@@ -68,6 +69,18 @@ def test_the_baseline_is_fitted_on_each_batch_during_the_next_iteration():
         assert torch.equal(a, b)
     assert second["value/explained_variance_after"] == vstats.explained_variance_after
     trainer.sampler.close()
+
+
+def test_iterations_report_the_share_of_time_in_mj_step():
+    trainer = Trainer(TrainConfig(task="Reacher", **TINY))
+    assert 0 < trainer.iterate()["time/physics_share"] < 1
+    trainer.sampler.close()
+    manager = Trainer(TrainConfig(task="ReachAndGrip2", macro=MacroSpec(skills=("gripper",), k=5), **TINY))
+    assert 0 < manager.iterate()["time/physics_share"] < 1  # the low-level steps inside the Manager's decisions
+    manager.sampler.close()
+    gym_task = Trainer(TrainConfig(task="Pendulum-v1", **TINY))  # Gymnasium's environments do not report it
+    assert math.isnan(gym_task.iterate()["time/physics_share"])
+    gym_task.sampler.close()
 
 
 def test_saved_policy_acts_like_the_trained_one(tmp_path):

@@ -62,7 +62,12 @@ class Timing:
     """Seconds spent per phase of sampling."""
 
     env: float = 0.0
+    """Stepping the environments (physics included)."""
     inference: float = 0.0
+    """Normalising observations and sampling actions."""
+    physics: float = 0.0
+    """Inside ``mj_step``, summed over every environment (and every worker); NaN where an environment does not report
+    it (``physics_seconds``: hrlp's tasks and the Manager's view of them do, Gymnasium's do not)."""
 
 
 class Sampler:
@@ -133,11 +138,13 @@ class Sampler:
         next_raw = np.empty((n, dim))
         raw_buf = np.empty((steps_per_env, n, dim))
         env_steps = 0
+        physics0 = physics_seconds(self.envs)
+        act = self.policy.numpy_actor()  # the weights stay fixed during a batch
         for t in range(steps_per_env):
             t0 = time.perf_counter()
             raw_buf[t] = self._obs
             obs_buf[t] = self.normalizer.normalize(self._obs)
-            actions = self.policy.act_numpy(obs_buf[t].astype(np.float32), self.generator)
+            actions = act(obs_buf[t].astype(np.float32), self.generator)
             if actions_buf is None:
                 actions_buf = np.empty((steps_per_env, *actions.shape))
             actions_buf[t] = actions
@@ -173,6 +180,7 @@ class Sampler:
             self.timing.inference += t1 - t0
             self.timing.env += t2 - t1
         assert actions_buf is not None
+        self.timing.physics += physics_seconds(self.envs) - physics0
         self.last_raw_obs = raw_buf
         if not self.normalizer.frozen:
             self.normalizer.update(raw_buf.reshape(-1, dim))
@@ -307,6 +315,7 @@ class ParallelSampler:
             self.normalizer.update(raw.reshape(-1, raw.shape[-1]))
         self.timing.env += max(p["env"] for p in parts)
         self.timing.inference += max(p["inference"] for p in parts)
+        self.timing.physics += sum(p["physics"] for p in parts)
         batch = Batch(**joined, discount=None if discounts[0] is None else torch.cat(discounts, dim=1),
                       env_steps=sum(p["batch"]["env_steps"] for p in parts))  # fmt: skip
         return batch, [e for p in parts for e in p["episodes"]]
@@ -371,7 +380,7 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
                 weights, stats, steps = arg
                 policy.load_state_dict({k: torch.from_numpy(v) for k, v in weights.items()})
                 normalizer.load_state_dict(stats)
-                env0, inf0 = sampler.timing.env, sampler.timing.inference
+                env0, inf0, phys0 = sampler.timing.env, sampler.timing.inference, sampler.timing.physics
                 batch, episodes = sampler.collect(steps)
                 reply = {
                     "batch": {f.name: getattr(batch, f.name) for f in dataclasses.fields(batch)},
@@ -379,6 +388,7 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
                     "raw": sampler.last_raw_obs,
                     "env": sampler.timing.env - env0,
                     "inference": sampler.timing.inference - inf0,
+                    "physics": sampler.timing.physics - phys0,
                 }
             elif cmd == "get_state":
                 reply = {"sampler": sampler.get_state(), "generator": sampler.generator.get_state().tolist()}
@@ -391,6 +401,17 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
             conn.send(("ok", reply))
         except Exception as e:  # reported to the parent, which raises it
             conn.send(("error", f"{type(e).__name__}: {e}"))
+
+
+def physics_seconds(envs: Sequence[gym.Env]) -> float:
+    """Seconds ``envs`` have spent inside ``mj_step`` so far, summed; NaN if any of them does not report it."""
+    total = 0.0
+    for env in envs:
+        seconds = getattr(env.unwrapped, "physics_seconds", None)
+        if seconds is None:
+            return math.nan
+        total += seconds
+    return total
 
 
 def action_decoder(space: gym.Space) -> Callable[[np.ndarray], Sequence]:

@@ -191,7 +191,7 @@ class Trainer:
         cfg = self.cfg
         t0 = time.perf_counter()
         timing = self.sampler.timing
-        env0, inf0 = timing.env, timing.inference
+        env0, inf0, phys0 = timing.env, timing.inference, timing.physics
         self.sampler.request(cfg.steps_per_env)
         vstats = None
         if self.pending_value_fit is not None:
@@ -235,6 +235,8 @@ class Trainer:
             "time/inference_share": (timing.inference - inf0) / wall,
             "time/value_fit_share": t_fit / wall,
             "time/update_share": (t2 - t1) / wall,
+            # mj_step's share of the cores' time: of one core, or of one core per sampling worker.
+            "time/physics_share": (timing.physics - phys0) / (wall * max(1, cfg.workers)),
             "time/steps_per_s": batch.env_steps / wall,
         }
         if cfg.macro is not None:

@@ -74,6 +74,34 @@ def test_value_net_and_numpy_copy():
 def test_policies_work_in_float64():
     policy = GaussianPolicy(3, 2).double()
     assert policy.act_numpy(np.zeros((2, 3))).dtype == np.float64
+    assert policy.numpy_actor()(np.zeros((2, 3)), None).dtype == np.float64
+
+
+@pytest.mark.parametrize("activation", [nn.Tanh, nn.ReLU, nn.ELU])  # ELU: no NumPy path, torch is used
+def test_numpy_actor_samples_what_act_numpy_samples(activation):
+    """The sampler's NumPy path draws the same noise from the generator; only float rounding may differ."""
+    policy = GaussianPolicy(5, 3, activation=activation, init_log_std=-0.5)
+    with torch.no_grad():
+        for p in policy.parameters():
+            p.add_(torch.randn(p.shape, generator=torch.Generator().manual_seed(2)))
+    obs = np.random.default_rng(0).normal(size=(16, 5)).astype(np.float32)
+    act = policy.numpy_actor()
+    g1, g2 = torch.Generator().manual_seed(1), torch.Generator().manual_seed(1)
+    for _ in range(3):  # the generators stay in step
+        a = act(obs, g1)
+        assert a.shape == (16, 3) and a.dtype == np.float32
+        np.testing.assert_allclose(a, policy.act_numpy(obs, g2), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(act(obs[0], g1), policy.act_numpy(obs[0], g2), rtol=1e-5, atol=1e-5)
+
+
+def test_numpy_actor_keeps_the_weights_it_was_made_with():
+    policy = GaussianPolicy(2, 1, init_log_std=-20.0)  # std ~ 0: the sample is the mean
+    act = policy.numpy_actor()
+    before = act(np.ones((1, 2), dtype=np.float32), None)
+    with torch.no_grad():
+        policy.mean_net[-1].bias.add_(1.0)
+    np.testing.assert_allclose(act(np.ones((1, 2), dtype=np.float32), None), before, atol=1e-6)
+    np.testing.assert_allclose(policy.numpy_actor()(np.ones((1, 2), dtype=np.float32), None), before + 1.0, atol=1e-6)
 
 
 def test_acting_in_inference_mode_does_not_break_later_training():

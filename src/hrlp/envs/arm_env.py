@@ -141,6 +141,11 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
         """Release the renderer."""
         self.physics.close()
 
+    @property
+    def physics_seconds(self) -> float:
+        """Wall-clock seconds this environment has spent inside ``mj_step`` (see :attr:`ArmPhysics.physics_seconds`)."""
+        return self.physics.physics_seconds
+
     # --- exact save and restore (for resuming training mid-episode) ----------------------------
     def get_state(self) -> dict[str, Any]:
         """Everything needed to continue this environment exactly: physics, episode progress, task state, RNG.

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+import time
 from dataclasses import dataclass
 from importlib import resources
 
@@ -100,6 +101,8 @@ class ArmPhysics:
         self.config = config
         self.model = load_model(config)
         self.data = mujoco.MjData(self.model)
+        self.physics_seconds = 0.0
+        """Wall-clock seconds spent inside ``mj_step`` so far (training reports its share of the wall time)."""
         m = self.model
         self._joint_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in JOINTS])
         self._joint_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in JOINTS])
@@ -250,7 +253,9 @@ class ArmPhysics:
         d = self.data
         t0 = d.time
         d.ctrl[:] = ctrl  # MuJoCo clamps to ctrlrange because the motors are ctrllimited.
+        start = time.perf_counter()
         mujoco.mj_step(self.model, d, self.config.substeps)
+        self.physics_seconds += time.perf_counter() - start
         return d.time > t0
 
     def instability_warnings(self) -> dict[str, int]:

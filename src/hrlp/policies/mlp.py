@@ -87,6 +87,15 @@ class Policy(nn.Module, ABC):
         actions = self.act(t, generator, deterministic).cpu().numpy()
         return actions[0] if single else actions
 
+    def numpy_actor(self) -> Callable[[np.ndarray, torch.Generator | None], np.ndarray]:
+        """``act(obs [N, obs_dim], generator) -> [N, ...]``: stochastic :meth:`act_numpy` with the weights as they are now.
+
+        For a sampler, whose weights stay fixed for a whole batch. Policies with a NumPy forward pass (the Gaussian
+        MLP) override it: the same random numbers from ``generator``, a few microseconds per call instead of
+        torch's per-operation overhead. Later changes to the weights are not seen; ask again after an update.
+        """
+        return lambda obs, generator=None: self.act_numpy(obs, generator)
+
 
 class GaussianPolicy(Policy):
     """``pi(a|s) = N(mu_theta(s), diag(exp(log_std)^2))`` with a state-independent ``log_std`` parameter ``[act_dim]``."""
@@ -106,6 +115,24 @@ class GaussianPolicy(Policy):
     def forward(self, obs: Tensor) -> DiagGaussian:
         """``[B, obs_dim] -> DiagGaussian`` with mean ``[B, act_dim]``."""
         return DiagGaussian(self.mean_net(obs), self.log_std)
+
+    def numpy_actor(self) -> Callable[[np.ndarray, torch.Generator | None], np.ndarray]:
+        """NumPy sampling ``mean + std * eps``, ``eps`` drawn from ``generator`` as :meth:`DiagGaussian.sample` draws it."""
+        dtype = self.log_std.dtype  # the policy's own precision, as act_numpy computes in it
+        std = torch.exp(self.log_std.detach()).cpu().numpy()
+        try:
+            mean_net = NumpyMLP(self.mean_net, std.dtype)
+        except TypeError:  # an activation NumPy does not have: torch it is
+            return super().numpy_actor()
+
+        def act(obs: np.ndarray, generator: torch.Generator | None = None) -> np.ndarray:
+            x = np.asarray(obs, dtype=std.dtype)
+            mean = mean_net(x[None] if x.ndim == 1 else x)
+            eps = torch.randn(mean.shape, generator=generator, dtype=dtype).numpy()
+            out = mean + std * eps
+            return out[0] if x.ndim == 1 else out
+
+        return act
 
 
 class CategoricalPolicy(Policy):

@@ -150,6 +150,11 @@ class MacroEnv(gym.Env):
                 "task_reward": float(res.task_reward[0])}  # fmt: skip
         return res.obs[0].copy(), float(res.rewards[0]), bool(res.terminated[0]), bool(res.truncated[0]), info
 
+    @property
+    def physics_seconds(self) -> float:
+        """Seconds the low-level task has spent inside ``mj_step``."""
+        return self.env.unwrapped.physics_seconds  # type: ignore[attr-defined]
+
     def get_state(self) -> dict[str, Any]:
         """The low-level task's exact state (JSON-serialisable); see :meth:`ArmEnv.get_state`."""
         return {"env": self.env.get_state(), "obs": self._obs.tolist()}
