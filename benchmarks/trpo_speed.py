@@ -158,12 +158,25 @@ def pusher_physics(n: int) -> float:
     return physics_step_seconds(u.model, u.data, u.frame_skip, n, 100)
 
 
-def arm_physics(n: int) -> float:
+def arm_physics(n: int, episode: int = 300) -> float:
+    """Seconds per control step of bare ``mj_step`` on the arm task from its own start states (reset every ``episode``
+    steps by the task), random controls: the physics a training run on it pays for, without anything around it."""
     from hrlp.envs import make
 
     env = make(ARM_TASK)
     env.reset(seed=0)
-    return physics_step_seconds(env.physics.model, env.physics.data, env.physics.config.substeps, n, 300)
+    p = env.unwrapped.physics
+    model, data, nsub = p.model, p.data, p.config.substeps
+    ctrls = np.random.default_rng(0).uniform(-1, 1, size=(n, model.nu))
+    total = 0.0
+    for start in range(0, n, episode):
+        env.reset()
+        t = time.perf_counter()
+        for c in ctrls[start : start + episode]:
+            data.ctrl[:] = c
+            mujoco.mj_step(model, data, nsub)
+        total += time.perf_counter() - t
+    return total / n
 
 
 def peak_rss_mib(task: str, batch_steps: int, baseline: bool) -> tuple[float, float]:
@@ -205,7 +218,7 @@ def main() -> None:
     ap.add_argument("--fisher-fraction", type=float, default=0.1, help="Fisher subsample of the fast hrlp run")
     ap.add_argument("--fast-envs", type=int, default=64, help="environments of the fast hrlp run")
     ap.add_argument("--fastest-value-iters", type=int, default=10, help="L-BFGS iterations of the fastest run's value fit")
-    ap.add_argument("--skip", default="", help="comma-separated: sb3,tianshou,arm,rss")
+    ap.add_argument("--skip", default="", help="comma-separated: pusher (hrlp on it),sb3,tianshou,arm,rss")
     ap.add_argument("--rss-child", help=argparse.SUPPRESS)
     ap.add_argument("--rss-baseline", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -223,7 +236,7 @@ def main() -> None:
     fastest_name = f"hrlp fastest (fast, {args.fastest_value_iters} L-BFGS iterations)"
     configs = {"hrlp": {}, f"hrlp {args.workers} workers": {"workers": args.workers}, fast_name: fast, fastest_name: fastest}
     for name, kw in configs.items():
-        if name != "hrlp" and args.workers < 2:
+        if "pusher" in skip or (name != "hrlp" and args.workers < 2):
             continue
         runs[name] = hrlp_run(TASK, args.steps, args.batch_steps, args.seed, **kw)
         rates[name] = runs[name]["steps_per_s"]

@@ -66,8 +66,8 @@ class Timing:
     inference: float = 0.0
     """Normalising observations and sampling actions."""
     physics: float = 0.0
-    """Inside ``mj_step``, summed over every environment (and every worker); NaN where an environment does not report
-    it (``physics_seconds``: hrlp's tasks and the Manager's view of them do, Gymnasium's do not)."""
+    """CPU time inside ``mj_step``, summed over every environment (and every worker); NaN where an environment does
+    not report it (``physics_seconds``: hrlp's tasks and the Manager's view of them do, Gymnasium's do not)."""
 
 
 class Sampler:
@@ -404,7 +404,7 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
 
 
 def physics_seconds(envs: Sequence[gym.Env]) -> float:
-    """Seconds ``envs`` have spent inside ``mj_step`` so far, summed; NaN if any of them does not report it."""
+    """CPU seconds ``envs`` have spent inside ``mj_step`` so far, summed; NaN if any of them does not report it."""
     total = 0.0
     for env in envs:
         seconds = getattr(env.unwrapped, "physics_seconds", None)

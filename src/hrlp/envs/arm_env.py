@@ -143,7 +143,7 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
 
     @property
     def physics_seconds(self) -> float:
-        """Wall-clock seconds this environment has spent inside ``mj_step`` (see :attr:`ArmPhysics.physics_seconds`)."""
+        """CPU seconds this environment has spent inside ``mj_step`` (see :attr:`ArmPhysics.physics_seconds`)."""
         return self.physics.physics_seconds
 
     # --- exact save and restore (for resuming training mid-episode) ----------------------------

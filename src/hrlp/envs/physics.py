@@ -102,7 +102,7 @@ class ArmPhysics:
         self.model = load_model(config)
         self.data = mujoco.MjData(self.model)
         self.physics_seconds = 0.0
-        """Wall-clock seconds spent inside ``mj_step`` so far (training reports its share of the wall time)."""
+        """CPU seconds spent inside ``mj_step`` so far (training reports its share of the cores' time)."""
         m = self.model
         self._joint_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in JOINTS])
         self._joint_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in JOINTS])
@@ -253,9 +253,9 @@ class ArmPhysics:
         d = self.data
         t0 = d.time
         d.ctrl[:] = ctrl  # MuJoCo clamps to ctrlrange because the motors are ctrllimited.
-        start = time.perf_counter()
+        start = time.thread_time()  # CPU time: a process preempted mid-step is not counted as physics
         mujoco.mj_step(self.model, d, self.config.substeps)
-        self.physics_seconds += time.perf_counter() - start
+        self.physics_seconds += time.thread_time() - start
         return d.time > t0
 
     def instability_warnings(self) -> dict[str, int]:

@@ -152,7 +152,7 @@ class MacroEnv(gym.Env):
 
     @property
     def physics_seconds(self) -> float:
-        """Seconds the low-level task has spent inside ``mj_step``."""
+        """CPU seconds the low-level task has spent inside ``mj_step``."""
         return self.env.unwrapped.physics_seconds  # type: ignore[attr-defined]
 
     def get_state(self) -> dict[str, Any]:
