@@ -13,6 +13,7 @@ Runs already finished in ``--out`` are reused, so an interrupted comparison cont
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -22,12 +23,14 @@ def _run(kind: str, seed: int, steps: int, out: Path, episodes: int) -> tuple[st
 
     from hrlp.evaluate import evaluate_run
     from hrlp.experiments.demo import demo_config
+    from hrlp.skills.macro_env import MacroSpec
     from hrlp.train import TrainConfig, train
 
     torch.set_num_threads(1)
     run = out / f"{kind}-s{seed}"
     if kind == "manager":
-        cfg = demo_config(steps, seed)
+        # The demo's settings over the Gripper and the parameterised Reacher (the demo itself now uses micro-actions).
+        cfg = dataclasses.replace(demo_config(steps, seed), macro=MacroSpec(("gripper", "reacher"), k=15))
     else:
         cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=50_000, num_envs=16, seed=seed)
     resume = (run / "checkpoint").exists()
