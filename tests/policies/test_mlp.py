@@ -94,6 +94,23 @@ def test_numpy_actor_samples_what_act_numpy_samples(activation):
     np.testing.assert_allclose(act(obs[0], g1), policy.act_numpy(obs[0], g2), rtol=1e-5, atol=1e-5)
 
 
+def test_numpy_actor_of_the_manager_samples_what_act_numpy_samples():
+    policy = HierarchicalPolicy(6, 3, (2, 0, 4), init_log_std=-0.5)
+    with torch.no_grad():
+        for p in policy.parameters():
+            p.add_(torch.randn(p.shape, generator=torch.Generator().manual_seed(3)))  # logits far from uniform
+    obs = np.random.default_rng(0).normal(size=(32, 6)).astype(np.float32)
+    act = policy.numpy_actor()
+    g1, g2 = torch.Generator().manual_seed(1), torch.Generator().manual_seed(1)
+    for _ in range(3):
+        a, b = act(obs, g1), policy.act_numpy(obs, g2)
+        assert a.shape == (32, 7) and a.dtype == np.float32
+        np.testing.assert_array_equal(a[:, 0], b[:, 0])  # the same choices
+        assert len(set(a[:, 0])) > 1
+        np.testing.assert_allclose(a[:, 1:], b[:, 1:], rtol=1e-5, atol=1e-5)
+    assert act(obs[0], g1).shape == (7,)
+
+
 def test_numpy_actor_keeps_the_weights_it_was_made_with():
     policy = GaussianPolicy(2, 1, init_log_std=-20.0)  # std ~ 0: the sample is the mean
     act = policy.numpy_actor()

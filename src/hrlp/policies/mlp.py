@@ -118,18 +118,15 @@ class GaussianPolicy(Policy):
 
     def numpy_actor(self) -> Callable[[np.ndarray, torch.Generator | None], np.ndarray]:
         """NumPy sampling ``mean + std * eps``, ``eps`` drawn from ``generator`` as :meth:`DiagGaussian.sample` draws it."""
-        dtype = self.log_std.dtype  # the policy's own precision, as act_numpy computes in it
-        std = torch.exp(self.log_std.detach()).cpu().numpy()
-        try:
-            mean_net = NumpyMLP(self.mean_net, std.dtype)
-        except TypeError:  # an activation NumPy does not have: torch it is
+        numpy_net = _numpy_copy(self.mean_net, self.log_std)
+        if numpy_net is None:
             return super().numpy_actor()
+        mean_net, std = numpy_net
 
         def act(obs: np.ndarray, generator: torch.Generator | None = None) -> np.ndarray:
             x = np.asarray(obs, dtype=std.dtype)
             mean = mean_net(x[None] if x.ndim == 1 else x)
-            eps = torch.randn(mean.shape, generator=generator, dtype=dtype).numpy()
-            out = mean + std * eps
+            out = mean + std * _randn(mean.shape, generator, std.dtype)
             return out[0] if x.ndim == 1 else out
 
         return act
@@ -177,6 +174,28 @@ class HierarchicalPolicy(Policy):
         out = self.net(obs)
         return Hierarchical(out[:, : self.n], out[:, self.n :], self.log_std, self.param_dims)
 
+    def numpy_actor(self) -> Callable[[np.ndarray, torch.Generator | None], np.ndarray]:
+        """NumPy sampling of ``[k, u]`` rows; ``k`` and the noise of ``u`` drawn from ``generator`` in
+        :meth:`Hierarchical.sample`'s order (categorical first)."""
+        numpy_net = _numpy_copy(self.net, self.log_std)
+        if numpy_net is None:
+            return super().numpy_actor()
+        net, std = numpy_net
+        n = self.n
+
+        def act(obs: np.ndarray, generator: torch.Generator | None = None) -> np.ndarray:
+            x = np.asarray(obs, dtype=std.dtype)
+            out = net(x[None] if x.ndim == 1 else x)
+            logits = out[:, :n]
+            p = np.exp(logits - logits.max(-1, keepdims=True))
+            p /= p.sum(-1, keepdims=True)
+            k = torch.multinomial(torch.from_numpy(p), 1, generator=generator).numpy().astype(std.dtype)
+            u = out[:, n:] + std * _randn(out[:, n:].shape, generator, std.dtype)
+            rows = np.concatenate([k, u], axis=1)
+            return rows[0] if x.ndim == 1 else rows
+
+        return act
+
     def act_tuples(
         self, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = False
     ) -> list[tuple]:
@@ -213,6 +232,20 @@ class ValueNet(nn.Module):
         """Batched no-grad evaluation: ``[N, obs_dim]`` NumPy -> ``[N]`` NumPy."""
         param = next(self.parameters())
         return self(torch.as_tensor(np.asarray(obs), dtype=param.dtype, device=param.device)).cpu().numpy()
+
+
+def _numpy_copy(net: nn.Sequential, log_std: Tensor) -> tuple[NumpyMLP, np.ndarray] | None:
+    """``(NumPy copy of net, exp(log_std))`` in the policy's precision, or None if ``net`` has a layer NumPy lacks."""
+    std = torch.exp(log_std.detach()).cpu().numpy()
+    try:
+        return NumpyMLP(net, std.dtype), std
+    except TypeError:
+        return None
+
+
+def _randn(shape: tuple[int, ...], generator: torch.Generator | None, dtype: np.dtype) -> np.ndarray:
+    """Standard normal noise drawn from ``generator`` exactly as :meth:`DiagGaussian.sample` draws it."""
+    return torch.randn(shape, generator=generator, dtype=torch.from_numpy(np.zeros(0, dtype)).dtype).numpy()
 
 
 _NUMPY_ACTIVATIONS: dict[type[nn.Module], Callable[[np.ndarray], np.ndarray]] = {
