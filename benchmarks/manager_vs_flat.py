@@ -30,7 +30,7 @@ def _run(kind: str, seed: int, steps: int, out: Path, episodes: int) -> tuple[st
     run = out / f"{kind}-s{seed}"
     if kind == "manager":
         # The demo's settings over the Gripper and the parameterised Reacher (the demo itself now uses micro-actions).
-        cfg = dataclasses.replace(demo_config(steps, seed), macro=MacroSpec(("gripper", "reacher"), k=15))
+        cfg = dataclasses.replace(demo_config(steps, seed, workers=1), macro=MacroSpec(("gripper", "reacher"), k=15))
     else:
         cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=50_000, num_envs=16, seed=seed)
     resume = (run / "checkpoint").exists()

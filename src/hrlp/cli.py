@@ -72,19 +72,20 @@ def render(
 @app.command()
 def demo(
     out_dir: Annotated[Path, typer.Option(help="Run directory (run again to continue it).")] = Path("runs/demo"),
-    steps: Annotated[int, typer.Option(help="Low-level environment steps of Manager training.")] = 1_500_000,
+    steps: Annotated[int, typer.Option(help="Low-level environment steps of Manager training.")] = 3_000_000,
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
     episodes: Annotated[int, typer.Option(help="Evaluation episodes for the success rate.")] = 100,
     video_steps: Annotated[int, typer.Option(help="Low-level steps in the video (default: one episode).")] = 0,
+    workers: Annotated[int, typer.Option(help="Sampling processes (1: sample in this process).")] = 2,
 ) -> None:
     """Train a Manager on reach-and-grip with the shipped skills; print its success rate, write a video and a plot."""
     from hrlp.checkpoint import CheckpointError
     from hrlp.experiments.demo import run_demo
 
     try:
-        if steps <= 0 or episodes <= 0 or video_steps < 0:
-            raise ValueError("--steps and --episodes must be positive, --video-steps at least 0")
-        res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console)
+        if steps <= 0 or episodes <= 0 or video_steps < 0 or workers < 1:
+            raise ValueError("--steps, --episodes and --workers must be positive, --video-steps at least 0")
+        res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers)
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
     console.print(f"success rate: {res.success}")

@@ -27,22 +27,28 @@ class DemoResult:
     plot: Path
 
 
-def demo_config(steps: int = 1_500_000, seed: int = 0) -> TrainConfig:
+DEMO_STEPS = 3_000_000
+"""The demo's training budget in low-level environment steps."""
+
+
+def demo_config(steps: int = DEMO_STEPS, seed: int = 0, workers: int = 2) -> TrainConfig:
     """The demo's Manager: ReachAndGrip2, the shipped gripper (k = 15) and the micro-action (9 torques for one step),
-    2,000 decisions per iteration, max KL 0.02: Figure 7's best skill set, as the ``headline`` preset runs it."""
+    2,000 decisions per iteration, max KL 0.02: Figure 7's best skill set, as the ``headline`` preset runs it,
+    sampled by ``workers`` processes (one per core on a two-core machine)."""
     return TrainConfig(
         task="ReachAndGrip2",
         steps=steps,
         batch_steps=2_000,
         num_envs=16,
+        workers=workers,
         seed=seed,
         macro=MacroSpec(("gripper",), k=15, micro=MicroAction()),
         trpo=TRPOConfig(max_kl=0.02),
     )
 
 
-def run_demo(out_dir: Path, steps: int = 1_500_000, seed: int = 0, episodes: int = 100, video_steps: int = 0,
-             console: Console | None = None) -> DemoResult:  # fmt: skip
+def run_demo(out_dir: Path, steps: int = DEMO_STEPS, seed: int = 0, episodes: int = 100, video_steps: int = 0,
+             console: Console | None = None, workers: int = 2) -> DemoResult:  # fmt: skip
     """Train (or continue) the demo Manager in ``out_dir``, evaluate it, write ``demo.mp4`` (``video_steps``
     low-level steps, 0 for one episode) and ``learning_curve.png``."""
     import dataclasses
@@ -54,7 +60,7 @@ def run_demo(out_dir: Path, steps: int = 1_500_000, seed: int = 0, episodes: int
     from hrlp.video import rollout_frames, write_video
 
     console = console or Console(stderr=True)
-    cfg = demo_config(steps, seed)
+    cfg = demo_config(steps, seed, workers)
     resume = (out_dir / "checkpoint").exists()
     if resume:
         saved = TrainConfig.from_json(load_checkpoint(out_dir / "checkpoint")[1]["config"])
