@@ -18,7 +18,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 
-def _run(kind: str, seed: int, steps: int, out: Path, episodes: int) -> tuple[str, int, int, int, float]:
+def _run(kind: str, seed: int, steps: int, out: Path, episodes: int, flat_batch: int) -> tuple[str, int, int, int, float]:
     import torch
 
     from hrlp.evaluate import evaluate_run
@@ -32,7 +32,7 @@ def _run(kind: str, seed: int, steps: int, out: Path, episodes: int) -> tuple[st
         # The demo's settings over the Gripper and the parameterised Reacher (the demo itself now uses micro-actions).
         cfg = dataclasses.replace(demo_config(steps, seed, workers=1), macro=MacroSpec(("gripper", "reacher"), k=15))
     else:
-        cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=50_000, num_envs=16, seed=seed)
+        cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=flat_batch, num_envs=16, seed=seed)
     resume = (run / "checkpoint").exists()
     for _ in train(cfg, run, resume=resume):
         pass
@@ -51,11 +51,16 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--episodes", type=int, default=100, help="evaluation episodes per run")
     ap.add_argument("--out", type=Path, default=Path("runs/manager_vs_flat"))
+    ap.add_argument("--flat-batch", type=int, default=50_000, help="environment steps per flat TRPO iteration (the paper's)")
     args = ap.parse_args()
     jobs = [(kind, s) for s in range(args.seeds) for kind in ("manager", "flat")]
     with ProcessPoolExecutor(args.workers) as pool:
         results = list(
-            pool.map(_run, *zip(*jobs, strict=True), *[[x] * len(jobs) for x in (args.steps, args.out, args.episodes)])
+            pool.map(
+                _run,
+                *zip(*jobs, strict=True),
+                *[[x] * len(jobs) for x in (args.steps, args.out, args.episodes, args.flat_batch)],
+            )
         )
     print(f"{'kind':<8} {'seed':>4} {'success':>9} {'return':>9}")
     for kind, seed, k, n, ret in results:

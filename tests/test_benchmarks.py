@@ -1,0 +1,42 @@
+"""Every benchmark script runs end to end at a tiny budget (their figures come from full runs; see docs/benchmarks.md)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+
+CASES = {  # script: (arguments, a line its output must contain)
+    "env_step.py": ("--steps 200 --repeats 1 --tasks Reacher,Gripper", "median env/physics time ratio"),
+    "stability.py": ("--steps 200 --tasks Reacher", "unstable episodes"),
+    "manager_speed.py": ("--rounds 1 --flat-batch 400 --manager-batch 40 --workers 1", "Manager / flat: sampling"),
+    "trpo_speed.py": (
+        "--steps 1000 --batch-steps 500 --arm-steps 500 --physics-steps 300 --workers 1 --skip sb3,tianshou,rss",
+        "mj_step share of 1 core(s) x wall: measured in the run",
+    ),
+    "trpo_returns.py": ("--libs hrlp --steps 1000 --batch-steps 500 --seeds 1 --episodes 1", "hrlp"),
+}
+
+
+def _run(script: str, args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(BENCH / script), *args.split()], capture_output=True, text=True, cwd=cwd,
+                          timeout=300)  # fmt: skip
+
+
+@pytest.mark.parametrize("script", sorted(CASES))
+def test_benchmark_script_runs(script, tmp_path):
+    args, expected = CASES[script]
+    out = _run(script, args, tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert expected in out.stdout, out.stdout[-2000:]
+
+
+def test_manager_vs_flat_runs_and_reuses_finished_runs(tmp_path):
+    args = f"--steps 300 --seeds 1 --workers 1 --episodes 1 --flat-batch 400 --out {tmp_path / 'cmp'}"
+    first = _run("manager_vs_flat.py", args, tmp_path)
+    assert first.returncode == 0, first.stderr[-2000:]
+    assert (tmp_path / "cmp" / "manager-s0" / "checkpoint").exists() and (tmp_path / "cmp" / "flat-s0").exists()
+    again = _run("manager_vs_flat.py", args, tmp_path)
+    assert again.returncode == 0 and again.stdout == first.stdout
