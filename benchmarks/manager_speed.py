@@ -4,7 +4,7 @@ Both train on ReachAndGrip2 with 16 environments: the flat policy with batches o
 steps, the Manager (shipped skills gripper + reacher, k = 15) with batches of ``--manager-batch`` decisions
 (about 15 environment steps each). Iterations of the two alternate so that machine noise hits both alike.
 Reported per kind: environment steps per second of sampling alone and of whole iterations (sampling + update),
-and the Manager / flat ratio.
+the share of the cores' time spent inside ``mj_step`` (``time/physics_share``), and the Manager / flat ratio.
 
     python benchmarks/manager_speed.py [--rounds 3] [--flat-batch 15000] [--manager-batch 1000] [--workers 2]
 
@@ -41,6 +41,7 @@ def main() -> None:  # run under `if __name__ == "__main__"`: sampling workers a
         trainers[f"Manager, {args.workers} workers"] = Trainer(cfg)
     sample: dict[str, list[float]] = {k: [] for k in trainers}
     whole: dict[str, list[float]] = {k: [] for k in trainers}
+    physics: dict[str, list[float]] = {k: [] for k in trainers}
     for r in range(args.rounds + 1):
         for kind, tr in trainers.items():
             t0 = time.perf_counter()
@@ -51,9 +52,11 @@ def main() -> None:  # run under `if __name__ == "__main__"`: sampling workers a
             batch_steps = st["time/steps_per_s"] * wall
             sample[kind].append(batch_steps / (wall * (st["time/env_share"] + st["time/inference_share"])))
             whole[kind].append(st["time/steps_per_s"])
-    print(f"{'kind':<20} {'sampling steps/s':>17} {'whole-iteration steps/s':>24}")
+            physics[kind].append(st["time/physics_share"])
+    print(f"{'kind':<20} {'sampling steps/s':>17} {'whole-iteration steps/s':>24} {'mj_step share':>14}")
     for kind in trainers:
-        print(f"{kind:<20} {statistics.median(sample[kind]):>17,.0f} {statistics.median(whole[kind]):>24,.0f}")
+        print(f"{kind:<20} {statistics.median(sample[kind]):>17,.0f} {statistics.median(whole[kind]):>24,.0f} "
+              f"{statistics.median(physics[kind]):>14.1%}")  # fmt: skip
     rs = statistics.median(sample["Manager"]) / statistics.median(sample["flat"])
     rw = statistics.median(whole["Manager"]) / statistics.median(whole["flat"])
     print(f"Manager / flat: sampling {rs:.2f}x, whole iteration {rw:.2f}x (goal: >= 0.67, i.e. within 1.5x)")

@@ -155,7 +155,11 @@ class _MacroFactory:
 
 
 class Trainer:
-    """TRPO on one task, flat or Manager: owns the policy, the baseline, the normaliser and the sampler."""
+    """TRPO on one task, flat or Manager: owns the policy, the baseline, the normaliser and the sampler.
+
+    With ``cfg.workers > 1`` it sets this process's torch threads to one (``torch.set_num_threads(1)``): the
+    sampling workers occupy the cores, and more threads here only compete with them.
+    """
 
     def __init__(self, cfg: TrainConfig) -> None:
         self.cfg = cfg
@@ -172,6 +176,9 @@ class Trainer:
         envs = [factory] * cfg.num_envs
         self.sampler: Sampler | ParallelSampler
         if cfg.workers > 1:
+            # The workers keep the cores busy; a second torch thread here would only compete with them (fewer steps/s
+            # with the demo's Manager on two cores), so this process computes with one.
+            torch.set_num_threads(1)
             self.sampler = ParallelSampler(envs, self.policy, self.normalizer, seed=cfg.seed, workers=cfg.workers)
         else:
             self.sampler = Sampler(envs, self.policy, self.normalizer, seed=cfg.seed)
