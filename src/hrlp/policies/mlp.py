@@ -91,8 +91,9 @@ class Policy(nn.Module, ABC):
         """``act(obs [N, obs_dim], generator) -> [N, ...]``: stochastic :meth:`act_numpy` with the weights as they are now.
 
         For a sampler, whose weights stay fixed for a whole batch. Policies with a NumPy forward pass (the Gaussian
-        MLP) override it: the same random numbers from ``generator``, a few microseconds per call instead of
-        torch's per-operation overhead. Later changes to the weights are not seen; ask again after an update.
+        and the hierarchical MLP) override it: the same random numbers from ``generator``, a few microseconds per
+        call instead of torch's per-operation overhead. Later changes to the weights are not seen; ask again after
+        an update.
         """
         return lambda obs, generator=None: self.act_numpy(obs, generator)
 
