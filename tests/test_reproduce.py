@@ -7,8 +7,9 @@ from typer.testing import CliRunner
 
 from hrlp.cli import app
 from hrlp.experiments.presets import PRESETS, Preset, Run
-from hrlp.experiments.runner import plan, reproduce
+from hrlp.experiments.runner import plan, reproduce, training_seconds
 from hrlp.experiments.tables import bootstrap_interval, build_tables
+from hrlp.plots import read_progress
 from hrlp.train import TrainConfig, env_factory
 
 
@@ -47,6 +48,11 @@ def test_runner_is_idempotent_resumable_and_tables_rebuild(tmp_path):
     # A bigger budget continues the finished runs from their checkpoints.
     more = reproduce(preset, tmp_path, budget=120, seeds=1, workers=2)
     assert len(more) == 2 and all(r["env_steps"] == 120 and not r.get("skipped") for r in more)
+    # The wall time counts every training iteration, those before the continuation included.
+    progress = read_progress(tmp_path / "tiny" / "normal" / "s0")
+    assert len(progress["env_steps"]) == 2
+    continued = next(r for r in more if r["run"] == "normal")
+    assert continued["wall_s"] >= training_seconds(progress) > 0
     files = build_tables(tmp_path, tmp_path / "results")
     table = (tmp_path / "results" / "tiny.md").read_text()
     assert "| normal | 2 |" in table and "| 0.5 |" in table and any(f.suffix == ".png" for f in files)

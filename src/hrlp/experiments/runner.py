@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from hrlp.atomic import atomic_path
 from hrlp.experiments.presets import PRESETS, Preset
 from hrlp.train import TrainConfig
@@ -65,6 +67,13 @@ def read_result(run_dir: Path) -> dict[str, Any] | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
+def training_seconds(progress: dict[str, np.ndarray]) -> float:
+    """Wall seconds of a run's training iterations, from its ``progress.csv`` columns (``read_progress``): each
+    iteration's new environment steps over its steps per second. A resumed run's log holds every iteration once."""
+    steps = np.diff(progress["env_steps"], prepend=0.0)
+    return float(np.sum(steps / progress["time/steps_per_s"]))
+
+
 def run_job(job: Job) -> dict[str, Any]:
     """Train (or resume) and evaluate one job, write ``result.json`` atomically and return it; skip if done."""
     import torch
@@ -77,18 +86,20 @@ def run_job(job: Job) -> dict[str, Any]:
     if done is not None and done["env_steps"] >= job.config.steps:
         return {**done, "skipped": True}
     torch.set_num_threads(1)
-    t0 = time.perf_counter()
     resume = (job.run_dir / "checkpoint").exists()
     for _ in train(job.config, job.run_dir, resume=resume):
         pass
+    t0 = time.perf_counter()
     ev = evaluate_run(job.run_dir, episodes=job.eval_episodes)
+    progress = read_progress(job.run_dir)
     result = {
         "preset": job.preset,
         "run": job.run,
         "seed": job.seed,
         "config": job.config.to_json(),
-        "env_steps": int(read_progress(job.run_dir)["env_steps"][-1]),
-        "wall_s": time.perf_counter() - t0 + (done or {}).get("wall_s", 0.0),
+        "env_steps": int(progress["env_steps"][-1]),
+        # Every logged iteration's wall time (an interrupted run's earlier sessions included) and this evaluation's.
+        "wall_s": training_seconds(progress) + time.perf_counter() - t0,
         "episodes": ev.episodes,
         "success": None if ev.success is None else vars(ev.success),
         "return": vars(ev.ret),
