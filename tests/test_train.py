@@ -167,6 +167,8 @@ def test_cli_train_eval_render_on_a_gymnasium_task_and_an_hrlp_task(tmp_path):
 def test_confidence_intervals():
     iv = wilson_interval(0, 10)
     assert iv.mean == 0 and iv.low == 0 and 0.25 < iv.high < 0.35  # Wilson: 0/10 -> [0, 0.278]
+    assert wilson_interval(0, 100).low == 0.0 and wilson_interval(100, 100).high == 1.0  # not rounding noise
+    assert wilson_interval(0, 100).high == pytest.approx(0.037, abs=1e-3)
     iv = wilson_interval(5, 10)
     assert iv.low == pytest.approx(0.2366, abs=1e-3) and iv.high == pytest.approx(0.7634, abs=1e-3)
     m = mean_interval([1.0, 2.0, 3.0])
