@@ -340,7 +340,7 @@ def build_tables(
             wall = sum(float(r["wall_s"]) for r in results) / 3600
             paper_cell = "-" if paper is None else f"{paper:g}"
             steps_cell = ", ".join(f"{s:,}" for s in steps)
-            ours = f"{m:.3g} [{lo:.3g}, {hi:.3g}]"
+            ours = f"{_g(m)} [{_g(lo)}, {_g(hi)}]"
             lines.append(f"| {name} | {len(results)} | {ours} | {paper_cell} | {steps_cell} | {wall:.2f} |")
         if metric == "success":
             logs = {
@@ -376,3 +376,8 @@ def _sweep_scatter(
         return None
     ylabel = {"success": "success rate (Definition 1)", "target_dist_sum": "TargetDistSum"}.get(metric, metric)
     return plot_sweep(groups, out / f"{preset_name}_scatter.png", axis.label, ylabel, axis.log, preset_name)
+
+
+def _g(x: float) -> str:
+    """Three significant digits; rounding noise next to 0 (an old Wilson bound of 3.5e-18) shows as 0."""
+    return "0" if abs(x) < 1e-12 else f"{x:.3g}"
