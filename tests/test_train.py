@@ -83,6 +83,23 @@ def test_iterations_report_the_share_of_time_in_mj_step():
     gym_task.sampler.close()
 
 
+def test_a_resumed_log_gains_the_columns_a_later_version_adds(tmp_path):
+    """A run logged before a statistic existed, resumed by a version that logs it: no row is misaligned."""
+    from hrlp.plots import read_progress
+    from hrlp.train import RunLogger
+
+    (tmp_path / "progress.csv").write_text("iteration,env_steps,time/steps_per_s,gone\n1,100,50.0,7\n")
+    logger = RunLogger(tmp_path)
+    logger.log({"iteration": 2, "env_steps": 200, "time/physics_share": 0.5, "time/steps_per_s": 40.0})
+    logger.log({"iteration": 3, "env_steps": 300, "time/physics_share": 0.6, "time/steps_per_s": 30.0})
+    logger.close()
+    log = read_progress(tmp_path)
+    assert list(log) == ["iteration", "env_steps", "time/steps_per_s", "gone", "time/physics_share"]
+    assert log["time/steps_per_s"].tolist() == [50.0, 40.0, 30.0]
+    assert math.isnan(log["time/physics_share"][0]) and log["time/physics_share"][1:].tolist() == [0.5, 0.6]
+    assert log["gone"][0] == 7 and np.isnan(log["gone"][1:]).all()
+
+
 def test_saved_policy_acts_like_the_trained_one(tmp_path):
     trainer = Trainer(TrainConfig(task="Reacher", **TINY))
     trainer.iterate()

@@ -26,6 +26,7 @@ import torch
 from hrlp.algos.kernels import gae
 from hrlp.algos.trpo import TRPOConfig, trpo_update
 from hrlp.algos.value import ValueFitConfig, fit_value
+from hrlp.atomic import atomic_path
 from hrlp.checkpoint import load_checkpoint, load_module, module_tensors, pack_generators, save_checkpoint, unpack_generators
 from hrlp.policies.mlp import GaussianPolicy, Policy, ValueNet, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
@@ -386,13 +387,18 @@ class RunLogger:
         self._tb = SummaryWriter(str(run_dir / "tb"))
 
     def log(self, stats: dict[str, float]) -> None:
-        """Append one row (the header comes from the first row)."""
+        """Append one row. The header comes from the first row, or from the file a resumed run already wrote; a
+        statistic that file lacks (logged by a later version of hrlp) widens its header, older rows leaving it empty."""
         if self._fields is None:
-            self._fields = list(stats)
-            new = not self._csv_path.exists()
-            with self._csv_path.open("a", newline="") as f:
-                if new:
-                    csv.writer(f).writerow(self._fields)
+            rows = _read_csv(self._csv_path)
+            if rows:
+                added = [k for k in stats if k not in rows[0]]
+                if added:
+                    _write_csv(self._csv_path, [rows[0] + added] + [r + [""] * len(added) for r in rows[1:]])
+                self._fields = rows[0] + added
+            else:
+                self._fields = list(stats)
+                _write_csv(self._csv_path, [self._fields])
         with self._csv_path.open("a", newline="") as f:
             csv.writer(f).writerow([stats.get(k, math.nan) for k in self._fields])
         step = int(stats["env_steps"])
@@ -456,14 +462,20 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
 
 def _truncate_log(path: Path, iteration: int) -> None:
     """Keep the header and the rows up to ``iteration`` (a kill between checkpoint and log leaves at most one gap)."""
+    rows = _read_csv(path)
+    if rows:
+        _write_csv(path, [rows[0]] + [r for r in rows[1:] if r and int(float(r[0])) <= iteration])
+
+
+def _read_csv(path: Path) -> list[list[str]]:
+    """Every row of a CSV file, the header first; [] if there is no file."""
     if not path.exists():
-        return
+        return []
     with path.open(newline="") as f:
-        rows = list(csv.reader(f))
-    if not rows:
-        return
-    kept = [rows[0]] + [r for r in rows[1:] if r and int(float(r[0])) <= iteration]
-    tmp = path.with_suffix(".csv.tmp")
-    with tmp.open("w", newline="") as f:
-        csv.writer(f).writerows(kept)
-    tmp.replace(path)
+        return list(csv.reader(f))
+
+
+def _write_csv(path: Path, rows: list[list[str]]) -> None:
+    """Replace ``path`` with ``rows``, atomically."""
+    with atomic_path(path) as tmp, tmp.open("w", newline="") as f:
+        csv.writer(f).writerows(rows)
