@@ -24,6 +24,7 @@ import resource
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 import gymnasium as gym
 import mujoco
@@ -136,19 +137,21 @@ def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 
             **{k: v / wall for k, v in shares.items()}}  # fmt: skip
 
 
-def physics_step_seconds(model: mujoco.MjModel, data: mujoco.MjData, nsub: int, n: int, episode: int) -> float:
-    """Seconds per control step of bare ``mj_step`` (``nsub`` substeps) with random controls, reset every ``episode``."""
-    rng = np.random.default_rng(0)
-    lo, hi = model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1]
-    ctrls = rng.uniform(lo, hi, size=(n, model.nu))
-    mujoco.mj_resetData(model, data)
-    t = time.perf_counter()
-    for i, c in enumerate(ctrls):
-        if i % episode == 0:
-            mujoco.mj_resetData(model, data)
-        data.ctrl[:] = c
-        mujoco.mj_step(model, data, nsub)
-    return (time.perf_counter() - t) / n
+def physics_step_seconds(model: mujoco.MjModel, data: mujoco.MjData, nsub: int, n: int, episode: int,
+                         reset: Callable[[], object] | None = None) -> float:  # fmt: skip
+    """Seconds per control step of bare ``mj_step`` (``nsub`` substeps) with random controls, ``reset`` (default
+    ``mj_resetData``) every ``episode`` steps; only the steps are timed."""
+    ctrls = np.random.default_rng(0).uniform(*model.actuator_ctrlrange.T, size=(n, model.nu))
+    reset = reset or (lambda: mujoco.mj_resetData(model, data))
+    total = 0.0
+    for start in range(0, n, episode):
+        reset()
+        t = time.perf_counter()
+        for c in ctrls[start : start + episode]:
+            data.ctrl[:] = c
+            mujoco.mj_step(model, data, nsub)
+        total += time.perf_counter() - t
+    return total / n
 
 
 def pusher_physics(n: int) -> float:
@@ -159,24 +162,14 @@ def pusher_physics(n: int) -> float:
 
 
 def arm_physics(n: int, episode: int = 300) -> float:
-    """Seconds per control step of bare ``mj_step`` on the arm task from its own start states (reset every ``episode``
-    steps by the task), random controls: the physics a training run on it pays for, without anything around it."""
+    """Seconds per control step of bare ``mj_step`` on the arm task from its own start states (the task resets every
+    ``episode`` steps), random controls: the physics a training run on it pays for, without anything around it."""
     from hrlp.envs import make
 
     env = make(ARM_TASK)
     env.reset(seed=0)
     p = env.unwrapped.physics
-    model, data, nsub = p.model, p.data, p.config.substeps
-    ctrls = np.random.default_rng(0).uniform(-1, 1, size=(n, model.nu))
-    total = 0.0
-    for start in range(0, n, episode):
-        env.reset()
-        t = time.perf_counter()
-        for c in ctrls[start : start + episode]:
-            data.ctrl[:] = c
-            mujoco.mj_step(model, data, nsub)
-        total += time.perf_counter() - t
-    return total / n
+    return physics_step_seconds(p.model, p.data, p.config.substeps, n, episode, reset=env.reset)
 
 
 def peak_rss_mib(task: str, batch_steps: int, baseline: bool) -> tuple[float, float]:

@@ -127,7 +127,7 @@ class GaussianPolicy(Policy):
         def act(obs: np.ndarray, generator: torch.Generator | None = None) -> np.ndarray:
             x = np.asarray(obs, dtype=std.dtype)
             mean = mean_net(x[None] if x.ndim == 1 else x)
-            out = mean + std * _randn(mean.shape, generator, std.dtype)
+            out = mean + std * _randn(mean.shape, generator, self.log_std)
             return out[0] if x.ndim == 1 else out
 
         return act
@@ -191,7 +191,7 @@ class HierarchicalPolicy(Policy):
             p = np.exp(logits - logits.max(-1, keepdims=True))
             p /= p.sum(-1, keepdims=True)
             k = torch.multinomial(torch.from_numpy(p), 1, generator=generator).numpy().astype(std.dtype)
-            u = out[:, n:] + std * _randn(out[:, n:].shape, generator, std.dtype)
+            u = out[:, n:] + std * _randn(out[:, n:].shape, generator, self.log_std)
             rows = np.concatenate([k, u], axis=1)
             return rows[0] if x.ndim == 1 else rows
 
@@ -244,9 +244,9 @@ def _numpy_copy(net: nn.Sequential, log_std: Tensor) -> tuple[NumpyMLP, np.ndarr
         return None
 
 
-def _randn(shape: tuple[int, ...], generator: torch.Generator | None, dtype: np.dtype) -> np.ndarray:
-    """Standard normal noise drawn from ``generator`` exactly as :meth:`DiagGaussian.sample` draws it."""
-    return torch.randn(shape, generator=generator, dtype=torch.from_numpy(np.zeros(0, dtype)).dtype).numpy()
+def _randn(shape: tuple[int, ...], generator: torch.Generator | None, like: Tensor) -> np.ndarray:
+    """Standard normal noise in ``like``'s dtype, drawn from ``generator`` as :meth:`DiagGaussian.sample` draws it."""
+    return torch.randn(shape, generator=generator, dtype=like.dtype).numpy()
 
 
 _NUMPY_ACTIVATIONS: dict[type[nn.Module], Callable[[np.ndarray], np.ndarray]] = {
