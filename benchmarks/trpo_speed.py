@@ -1,17 +1,18 @@
 """TRPO training throughput (env steps/s): sb3-contrib, Tianshou and hrlp on Pusher-v5, plus physics alone.
 
-Every library trains TRPO for the same number of environment steps in this one process, one torch thread each.
+Every library trains TRPO for the same number of environment steps in this one process, one torch thread each (hrlp
+with sampling workers computes its TRPO step with one thread per worker, while the workers wait for it).
 Also reported: hrlp's time breakdown (env / inference / update), its fraction of the raw ``mujoco.mj_step``
 ceiling, the same on the arm task ReachAndGrip2, and the peak resident memory of a 50,000-step hrlp batch
 (measured in a subprocess, so the figure is hrlp's alone).
 
-    python benchmarks/trpo_speed.py [--steps 100000] [--batch-steps 25000] [--arm-steps 50000] [--workers 2]
+    python benchmarks/trpo_speed.py [--steps 100000] [--batch-steps 25000] [--arm-steps 150000] [--workers 2]
                                     [--fisher-fraction 0.1] [--fast-envs 64] [--skip tianshou]
 
 hrlp runs four ways: its defaults in one process; with ``--workers`` sampling processes; "fast", which adds
 Fisher-vector products on a 10% subsample (Schulman et al. 2015, Section 6) and 64 environments; and "fastest", which
-also fits the baseline with 10 L-BFGS iterations instead of 25. ``benchmarks/trpo_returns.py --hrlp fastest`` checks
-that the fastest settings still learn as well as sb3-contrib.
+also fits the baseline with 10 L-BFGS iterations instead of 25, on every 4th time step of the batch.
+``benchmarks/trpo_returns.py --hrlp fastest`` checks that the fastest settings still learn as well as sb3-contrib.
 
 Goals: hrlp >= 10x sb3-contrib and >= 3x Tianshou in env steps/s; >= 50% of hrlp's wall time in physics on the
 arm tasks; a 50,000-step batch within 1 GB RSS.
@@ -102,7 +103,7 @@ def tianshou_steps_per_s(steps: int, seed: int, num_envs: int = 16) -> float:
 
 
 def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 1, fisher_fraction: float = 1.0,
-             num_envs: int = 16, value_iters: int = 25) -> dict[str, float]:  # fmt: skip
+             num_envs: int = 16, value_iters: int = 25, value_fraction: float = 1.0) -> dict[str, float]:  # fmt: skip
     """hrlp TRPO (batched inference over ``num_envs`` envs, ``workers`` sampling processes): steps/s and step-weighted
     time shares (with workers, the env and inference shares are those of the slowest worker; they overlap with the
     value fit, which runs in the main process meanwhile). ``physics`` is the time measured inside ``mj_step`` in the
@@ -113,7 +114,7 @@ def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 
 
     trpo = TRPOConfig(fisher_fraction=fisher_fraction)
     cfg = TrainConfig(task=task, steps=steps, batch_steps=batch_steps, num_envs=num_envs, seed=seed, workers=workers,
-                      trpo=trpo, value=ValueFitConfig(max_iter=value_iters))  # fmt: skip
+                      trpo=trpo, value=ValueFitConfig(max_iter=value_iters, fraction=value_fraction))  # fmt: skip
     trainer = Trainer(cfg)
     wall = 0.0
     shares = {"env": 0.0, "inference": 0.0, "value_fit": 0.0, "update": 0.0, "physics": 0.0}
@@ -202,7 +203,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=100_000, help="env steps per library on Pusher-v5")
     ap.add_argument("--batch-steps", type=int, default=25_000, help="hrlp env steps per TRPO iteration")
-    ap.add_argument("--arm-steps", type=int, default=50_000, help="hrlp env steps on ReachAndGrip2")
+    ap.add_argument("--arm-steps", type=int, default=150_000, help="hrlp env steps on ReachAndGrip2")
     ap.add_argument("--physics-steps", type=int, default=20_000, help="control steps of raw mj_step per timing")
     ap.add_argument("--rss-batch", type=int, default=50_000, help="batch_steps of the memory measurement")
     ap.add_argument("--rss-task", default=ARM_TASK)
@@ -211,6 +212,7 @@ def main() -> None:
     ap.add_argument("--fisher-fraction", type=float, default=0.1, help="Fisher subsample of the fast hrlp run")
     ap.add_argument("--fast-envs", type=int, default=64, help="environments of the fast hrlp run")
     ap.add_argument("--fastest-value-iters", type=int, default=10, help="L-BFGS iterations of the fastest run's value fit")
+    ap.add_argument("--fastest-value-fraction", type=float, default=0.25, help="share of time steps the fastest run fits on")
     ap.add_argument("--skip", default="", help="comma-separated: pusher (hrlp on it),sb3,tianshou,arm,rss")
     ap.add_argument("--rss-child", help=argparse.SUPPRESS)
     ap.add_argument("--rss-baseline", action="store_true", help=argparse.SUPPRESS)
@@ -225,8 +227,9 @@ def main() -> None:
     runs: dict[str, dict[str, float]] = {}
     fast = {"workers": args.workers, "fisher_fraction": args.fisher_fraction, "num_envs": args.fast_envs}
     fast_name = f"hrlp fast ({args.workers} workers, Fisher {args.fisher_fraction:g}, {args.fast_envs} envs)"
-    fastest = {**fast, "value_iters": args.fastest_value_iters}
-    fastest_name = f"hrlp fastest (fast, {args.fastest_value_iters} L-BFGS iterations)"
+    fastest = {**fast, "value_iters": args.fastest_value_iters, "value_fraction": args.fastest_value_fraction}
+    fastest_name = (f"hrlp fastest (fast, baseline: {args.fastest_value_iters} L-BFGS iterations on "
+                    f"{args.fastest_value_fraction:.0%} of the steps)")  # fmt: skip
     configs = {"hrlp": {}, f"hrlp {args.workers} workers": {"workers": args.workers}, fast_name: fast, fastest_name: fastest}
     for name, kw in configs.items():
         if "pusher" in skip or (name != "hrlp" and args.workers < 2):

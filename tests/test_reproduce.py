@@ -1,6 +1,7 @@
 """Presets, the reproduction runner (process pool and Ray) and the tables, at tiny budgets."""
 
 import json
+from dataclasses import replace
 
 import pytest
 from typer.testing import CliRunner
@@ -35,6 +36,16 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
                 built.add(key)
     fig7 = {r.name: r.paper for r in PRESETS["reach-and-grip-2"].runs}
     assert fig7["gripper+micro,c2=3,tr=0.03"] == 0.86 and fig7["gripper+s-reacher,c2=4,tr=0.06"] == 0.70
+    # The tuned grid differs from Figure 7's only in the Manager's batch and maximal KL, and its headline cell is
+    # the headline preset's run.
+    tuned = {r.name: r for r in PRESETS["reach-and-grip-2-tuned"].runs}
+    assert {n: r.paper for n, r in tuned.items()} == fig7
+    paper_cell = next(r for r in PRESETS["reach-and-grip-2"].runs if r.name == "gripper+reacher,c2=4,tr=0.06").config
+    tuned_cell = tuned["gripper+reacher,c2=4,tr=0.06"].config
+    assert (tuned_cell.batch_steps, tuned_cell.trpo.max_kl) == (2_000, 0.02)
+    assert replace(tuned_cell, batch_steps=paper_cell.batch_steps, trpo=paper_cell.trpo) == paper_cell
+    headline = next(r for r in PRESETS["headline"].runs if r.name == "manager:gripper+micro").config
+    assert replace(tuned["gripper+micro,c2=3,tr=0.03"].config, task_kwargs={}) == headline
 
 
 def test_runner_is_idempotent_resumable_and_tables_rebuild(tmp_path):

@@ -11,7 +11,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from hrlp.algos.value import fit_value
+from hrlp.algos.value import ValueFitConfig, fit_value
 from hrlp.checkpoint import load_checkpoint
 from hrlp.cli import app
 from hrlp.evaluate import evaluate_run, mean_interval, wilson_interval
@@ -69,6 +69,22 @@ def test_the_baseline_is_fitted_on_each_batch_during_the_next_iteration():
         assert torch.equal(a, b)
     assert second["value/explained_variance_after"] == vstats.explained_variance_after
     trainer.sampler.close()
+
+
+def test_the_baseline_fit_on_a_fraction_of_the_batch_keeps_whole_time_steps():
+    cfg = TrainConfig(task="Reacher", value=ValueFitConfig(fraction=0.25), **TINY)  # 50 time steps x 4 environments
+    trainer = Trainer(cfg)
+    trainer.iterate()
+    obs, returns = trainer.pending_value_fit
+    assert obs.shape == (13 * 4, trainer.obs_dim) and returns.shape == (13 * 4,)
+    full = Trainer(TrainConfig(task="Reacher", **TINY))
+    full.iterate()
+    full_obs, full_returns = full.pending_value_fit
+    # The same seed samples the same batch; the fraction keeps time steps 0, 4, ..., 48 of every environment.
+    assert torch.equal(obs, full_obs.reshape(50, 4, -1)[::4].reshape(-1, full_obs.shape[-1]))
+    assert torch.equal(returns, full_returns.reshape(50, 4)[::4].reshape(-1))
+    trainer.sampler.close()
+    full.sampler.close()
 
 
 def test_iterations_report_the_share_of_time_in_mj_step():

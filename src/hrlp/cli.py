@@ -182,6 +182,9 @@ _TASK_ARG = Annotated[
 _WORKERS = Annotated[int, typer.Option(help="Processes sampling at the same time (e.g. one per core); 1: in this process.")]
 _INIT_LOG_STD = Annotated[float, typer.Option(help="Initial log std of the Gaussian action noise.")]
 _VALUE_ITERS = Annotated[int, typer.Option(help="L-BFGS iterations of the baseline fit per iteration (modular_rl: 25).")]
+_VALUE_FRACTION = Annotated[
+    float, typer.Option(help="Share of the batch's time steps the baseline is fitted on (1: every one, the default).")
+]
 _FISHER_FRACTION = Annotated[
     float, typer.Option(help="Share of the batch the Fisher-vector products use (TRPO paper: 0.1; 1: exact, the default).")
 ]
@@ -205,13 +208,14 @@ def train(
     init_log_std: _INIT_LOG_STD = 0.0,
     fisher_fraction: _FISHER_FRACTION = 1.0,
     value_iters: _VALUE_ITERS = 25,
+    value_fraction: _VALUE_FRACTION = 1.0,
     workers: _WORKERS = 1,
     resume: _RESUME = False,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
     settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
                     episode_steps=episode_steps, init_log_std=init_log_std, workers=workers,
-                    value_iters=value_iters)  # fmt: skip
+                    value_iters=value_iters, value_fraction=value_fraction)  # fmt: skip
     _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps)
 
 
@@ -239,6 +243,7 @@ def train_manager(
     init_log_std: _INIT_LOG_STD = 0.0,
     fisher_fraction: _FISHER_FRACTION = 1.0,
     value_iters: _VALUE_ITERS = 25,
+    value_fraction: _VALUE_FRACTION = 1.0,
     workers: _WORKERS = 1,
     resume: _RESUME = False,
 ) -> None:
@@ -253,7 +258,7 @@ def train_manager(
         raise _fail(str(e)) from None
     settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
                     episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec,
-                    value_iters=value_iters)  # fmt: skip
+                    value_iters=value_iters, value_fraction=value_fraction)  # fmt: skip
     _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps)
 
 
@@ -300,7 +305,7 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
             if (out / "checkpoint").exists():
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
             trpo = TRPOConfig(**trpo_settings)
-            value = ValueFitConfig(max_iter=settings.pop("value_iters"))
+            value = ValueFitConfig(max_iter=settings.pop("value_iters"), fraction=settings.pop("value_fraction"))
             cfg = TrainConfig(**settings, trpo=trpo, value=value, task_kwargs=parse_task_args(task_arg))
         env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
     except (ValueError, CheckpointError) as e:

@@ -13,6 +13,7 @@ import dataclasses
 import functools
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -158,8 +159,9 @@ class _MacroFactory:
 class Trainer:
     """TRPO on one task, flat or Manager: owns the policy, the baseline, the normaliser and the sampler.
 
-    With ``cfg.workers > 1`` it sets this process's torch threads to one (``torch.set_num_threads(1)``): the
-    sampling workers occupy the cores, and more threads here only compete with them.
+    With ``cfg.workers > 1`` this process computes with one torch thread while the workers sample (the baseline fit
+    runs then, and more threads would only compete with them for the cores), and with one thread per worker (at most
+    one per core) for the TRPO step, while the workers wait for the next batch's weights.
     """
 
     def __init__(self, cfg: TrainConfig) -> None:
@@ -176,9 +178,12 @@ class Trainer:
         self.normalizer = RunningNormalizer(obs_dim)
         envs = [factory] * cfg.num_envs
         self.sampler: Sampler | ParallelSampler
+        self._threads: tuple[int, int] | None = None
+        """Torch threads of this process ``(while the workers sample, during the TRPO step)``; None: torch's own."""
         if cfg.workers > 1:
-            # The workers keep the cores busy; a second torch thread here would only compete with them (fewer steps/s
-            # with the demo's Manager on two cores), so this process computes with one.
+            # While the workers sample they keep the cores busy, and a second torch thread here only competes with them
+            # (fewer steps/s with the demo's Manager on two cores); during the TRPO step they wait, and the cores are free.
+            self._threads = (1, max(1, min(cfg.workers, os.cpu_count() or 1)))
             torch.set_num_threads(1)
             self.sampler = ParallelSampler(envs, self.policy, self.normalizer, seed=cfg.seed, workers=cfg.workers)
         else:
@@ -208,6 +213,8 @@ class Trainer:
         t_fit = time.perf_counter() - t0
         batch, episodes = self.sampler.receive()
         t1 = time.perf_counter()
+        if self._threads is not None:
+            torch.set_num_threads(self._threads[1])
         T, N, D = batch.obs.shape
         obs = batch.obs.reshape(T * N, D)
         with torch.no_grad():
@@ -223,7 +230,10 @@ class Trainer:
             list(self.policy.parameters()), lambda: self.policy(obs), old_dist, actions, adv.advantages.reshape(-1), cfg.trpo,
             fisher_dist_fn=None if stride == 1 else lambda: self.policy(obs[::stride]),
         )  # fmt: skip
-        self.pending_value_fit = (obs, adv.returns.reshape(-1).detach())
+        vstride = round(1 / cfg.value.fraction)  # whole time steps, so every environment's episodes stay in the fit
+        self.pending_value_fit = (batch.obs[::vstride].reshape(-1, D), adv.returns[::vstride].reshape(-1).detach())
+        if self._threads is not None:
+            torch.set_num_threads(self._threads[0])
         t2 = time.perf_counter()
         self.iteration += 1
         self.env_steps += batch.env_steps

@@ -38,7 +38,9 @@ def test_fit_works_in_float32_and_more_iterations_help():
     assert evs[1] > evs[0]
 
 
-@pytest.mark.parametrize(("field", "value"), [("max_iter", 0), ("l2_coef", -1.0), ("history_size", 0)])
+@pytest.mark.parametrize(
+    ("field", "value"), [("max_iter", 0), ("l2_coef", -1.0), ("history_size", 0), ("fraction", 0.0), ("fraction", 1.5)]
+)
 def test_config_validation(field, value):
     with pytest.raises(ValueError, match=field):
         ValueFitConfig(**{field: value})

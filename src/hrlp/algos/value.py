@@ -29,6 +29,11 @@ class ValueFitConfig:
     """Weight of the L2 penalty ``sum_w ||w||^2`` over all value-net parameters (modular_rl: 1e-3)."""
     history_size: int = 10
     """Number of curvature pairs L-BFGS keeps (scipy's L-BFGS-B default, as in modular_rl)."""
+    fraction: float = 1.0
+    """Share of the batch's time steps the trainer fits on (every ``round(1 / fraction)``-th step of every
+    environment). The fit is the costliest part of a flat iteration after sampling, and a baseline needs fewer
+    samples than the policy step: consecutive states of one episode carry nearly the same targets. 1.0: every
+    state (modular_rl)."""
 
     def __post_init__(self) -> None:
         if self.max_iter < 1:
@@ -37,6 +42,8 @@ class ValueFitConfig:
             raise ValueError(f"l2_coef must be a finite number >= 0, got {self.l2_coef}")
         if self.history_size < 1:
             raise ValueError(f"history_size must be >= 1, got {self.history_size}")
+        if not 0 < self.fraction <= 1:
+            raise ValueError(f"value fraction must be in (0, 1], got {self.fraction}")
 
 
 @dataclass(frozen=True)

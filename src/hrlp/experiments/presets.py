@@ -173,6 +173,22 @@ PRESETS: dict[str, Preset] = {
             ),
         ),
         Preset(
+            "reach-and-grip-2-tuned",
+            "Figure 7's grid (four skill sets x c2 x tr, k = 15) with the headline's Manager settings: 2,000 decisions "
+            "per batch and max KL 0.02 instead of the paper's 5,000 and 0.01",
+            "Section 4.3.1, Figure 7",
+            tuple(
+                Run(
+                    f"{name},c2={c2},tr={tr}",
+                    replace(_tuned_manager(skills, micro), task_kwargs={"c2": c2, "tr": tr}),
+                    _FIG7[name][(c2, tr)],
+                )
+                for name, (skills, micro) in _FIG7_SKILLS.items()
+                for c2, tr in _GRID
+            ),
+            budget=3_000_000,
+        ),
+        Preset(
             "headline",
             "The paper's headline claims at one reward cell (c2 3, tr 0.03): Managers over gripper + reacher, "
             "gripper + s-reacher (gluing), gripper + micro and gripper + reacher + micro against flat TRPO "
