@@ -172,6 +172,7 @@ def test_cli_rejects_bad_input_before_any_compute(tmp_path):
         (["train", "Reacher", "--batch-steps", "0"], "batch_steps"),
         (["train", "Reacher", "--fisher-fraction", "0"], "fisher_fraction"),
         (["train-manager", "ReachAndGrip2", "--skills", "gripper", "--value-iters", "0"], "max_iter"),
+        (["train", "Reacher", "--value-fraction", "1.5"], "value fraction"),
         (["train", "hrlp_test/MultiDiscreteAction-v0"], "unsupported action space"),
         (["eval", str(tmp_path / "missing")], "no checkpoint"),
     ):
