@@ -14,6 +14,7 @@ from hrlp.experiments.tables import (
     build_tables,
     censored_median,
     format_steps,
+    grid_lines,
     run_crossings,
     sample_efficiency_lines,
     smoothed_rate,
@@ -187,3 +188,25 @@ def test_build_tables_writes_the_sweep_scatter_and_the_sample_efficiency_table(t
         build_tables(root, out, thresholds=(1.5,))
     with pytest.raises(ValueError, match="must end in"):
         plot_sweep([(1.0, [0.5])], out / "scatter.txt", "x", "y")
+
+
+def test_grid_lines_lay_runs_out_as_the_papers_figure():
+    lines = grid_lines({"a,c2=3,tr=0.03": ("0.5", 0.86), "a,c2=4,tr=0.06": ("0.25", None), "b,c2=3,tr=0.03": ("0", 0.1)})
+    assert lines == [
+        "| | c2=3, tr=0.03 | c2=4, tr=0.06 |",
+        "|---|---|---|",
+        "| a | 0.5 (0.86) | 0.25 |",
+        "| b | 0 (0.1) |  |",
+    ]
+    with pytest.raises(ValueError, match="ROW,COLUMN"):
+        grid_lines({"no-comma": ("0", None)})
+
+
+def test_figure_7_presets_get_the_grid_layout(tmp_path):
+    root, out = tmp_path / "runs", tmp_path / "results"
+    _write_run(root, "reach-and-grip-2-tuned", "gripper+micro,c2=3,tr=0.06", 0, 0.875, [0.1, 0.5])
+    _write_run(root, "reach-and-grip-2-tuned", "gripper+reacher,c2=3,tr=0.03", 0, 0.25, [0.1, 0.2])
+    build_tables(root, out)
+    md = (out / "reach-and-grip-2-tuned.md").read_text()
+    assert "| | c2=3, tr=0.06 | c2=3, tr=0.03 |" in md
+    assert "| gripper+micro | 0.875 (0.74) |  |" in md and "| gripper+reacher |  | 0.25 (0.17) |" in md

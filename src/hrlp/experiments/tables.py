@@ -97,6 +97,32 @@ def sweep_x(preset: str, config: dict[str, Any]) -> float | None:
         return None
 
 
+# --- grids: presets whose runs are ROW,COLUMN cells of one of the paper's figures (Figure 7) ------------------------
+
+#: Presets laid out as the paper's Figure 7: run ``SKILLS,c2=X,tr=Y`` is row SKILLS, column ``c2=X,tr=Y``.
+GRIDS = frozenset({"reach-and-grip-2", "reach-and-grip-2-tuned"})
+
+
+def grid_lines(cells: dict[str, tuple[str, float | None]]) -> list[str]:
+    """A markdown table with one row per skill set and one column per reward cell, each ``ours (paper)``.
+
+    Args:
+        cells: run name ``ROW,COLUMN`` (split at the first comma) -> (our formatted figure, the paper's or None).
+    """
+    rows: dict[str, dict[str, str]] = {}
+    columns: list[str] = []
+    for name, (ours, paper) in cells.items():
+        row, sep, col = name.partition(",")
+        if not sep:
+            raise ValueError(f"grid run {name!r} is not ROW,COLUMN")
+        if col not in columns:
+            columns.append(col)
+        rows.setdefault(row, {})[col] = ours + ("" if paper is None else f" ({paper:g})")
+    lines = ["| | " + " | ".join(c.replace(",", ", ") for c in columns) + " |", "|---|" + "---|" * len(columns)]
+    lines += [f"| {row} | " + " | ".join(r.get(c, "") for c in columns) + " |" for row, r in rows.items()]
+    return lines
+
+
 # --- sample efficiency: steps until the training success rate first reaches a threshold ------------------------
 
 
@@ -329,6 +355,7 @@ def build_tables(
             "| run | seeds | ours | paper | env steps per run | wall time (h, all seeds) |",
             "|---|---:|---|---:|---:|---:|",
         ]
+        grid: dict[str, tuple[str, float | None]] = {}
         for name in order:
             results = [r for _, r in runs[name]]
             values = [v for v in (metric_value(r, metric) for r in results) if v is not None]
@@ -342,6 +369,10 @@ def build_tables(
             steps_cell = ", ".join(f"{s:,}" for s in steps)
             ours = f"{_g(m)} [{_g(lo)}, {_g(hi)}]"
             lines.append(f"| {name} | {len(results)} | {ours} | {paper_cell} | {steps_cell} | {wall:.2f} |")
+            grid[name] = (_g(m), paper)
+        if preset_name in GRIDS:
+            lines += ["", f"The same as the paper's figure lays it out: {metric.replace('_', ' ')}, ours (paper's).", ""]
+            lines += grid_lines(grid)
         if metric == "success":
             logs = {
                 name: (runs[name][0][1]["config"].get("macro") is not None, [read_progress(d) for d, _ in runs[name]])
