@@ -178,12 +178,12 @@ class Trainer:
         self.normalizer = RunningNormalizer(obs_dim)
         envs = [factory] * cfg.num_envs
         self.sampler: Sampler | ParallelSampler
-        self._threads: tuple[int, int] | None = None
-        """Torch threads of this process ``(while the workers sample, during the TRPO step)``; None: torch's own."""
+        self._update_threads: int | None = None
+        """Torch threads of this process during the TRPO step (one while workers sample); None: torch's own throughout."""
         if cfg.workers > 1:
             # While the workers sample they keep the cores busy, and a second torch thread here only competes with them
             # (fewer steps/s with the demo's Manager on two cores); during the TRPO step they wait, and the cores are free.
-            self._threads = (1, max(1, min(cfg.workers, os.cpu_count() or 1)))
+            self._update_threads = max(1, min(cfg.workers, os.cpu_count() or 1))
             torch.set_num_threads(1)
             self.sampler = ParallelSampler(envs, self.policy, self.normalizer, seed=cfg.seed, workers=cfg.workers)
         else:
@@ -213,8 +213,8 @@ class Trainer:
         t_fit = time.perf_counter() - t0
         batch, episodes = self.sampler.receive()
         t1 = time.perf_counter()
-        if self._threads is not None:
-            torch.set_num_threads(self._threads[1])
+        if self._update_threads is not None:
+            torch.set_num_threads(self._update_threads)
         T, N, D = batch.obs.shape
         obs = batch.obs.reshape(T * N, D)
         with torch.no_grad():
@@ -232,8 +232,8 @@ class Trainer:
         )  # fmt: skip
         vstride = round(1 / cfg.value.fraction)  # whole time steps, so every environment's episodes stay in the fit
         self.pending_value_fit = (batch.obs[::vstride].reshape(-1, D), adv.returns[::vstride].reshape(-1).detach())
-        if self._threads is not None:
-            torch.set_num_threads(self._threads[0])
+        if self._update_threads is not None:
+            torch.set_num_threads(1)
         t2 = time.perf_counter()
         self.iteration += 1
         self.env_steps += batch.env_steps
