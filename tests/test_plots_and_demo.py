@@ -35,3 +35,17 @@ def test_demo_trains_evaluates_and_writes_video_and_plot(tmp_path):
     r = CliRunner().invoke(app, ["demo", "--out-dir", str(out), "--steps", "100", "--episodes", "1", "--video-steps", "5"])
     assert r.exit_code == 0, r.output
     assert len(read_progress(out)["env_steps"]) == 1
+
+
+def test_demo_cli_defaults_are_the_demos_own():
+    """The CLI keeps its defaults literal (so that ``hrlp --help`` need not import torch); they must match the demo's."""
+    import inspect
+
+    from hrlp.cli import demo
+    from hrlp.experiments.demo import DEMO_STEPS, demo_config
+
+    params = inspect.signature(demo).parameters
+    assert params["steps"].default == DEMO_STEPS
+    config_defaults = inspect.signature(demo_config).parameters
+    assert params["seed"].default == config_defaults["seed"].default
+    assert params["workers"].default == config_defaults["workers"].default

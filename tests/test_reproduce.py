@@ -46,6 +46,25 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     assert replace(tuned_cell, batch_steps=paper_cell.batch_steps, trpo=paper_cell.trpo) == paper_cell
     headline = next(r for r in PRESETS["headline"].runs if r.name == "manager:gripper+micro").config
     assert replace(tuned["gripper+micro,c2=3,tr=0.03"].config, task_kwargs={}) == headline
+    # Each tuned Appendix C sweep changes one setting of one cell of the tuned grid, and includes that cell itself.
+    for name, base, setting in (
+        ("manager-kl-tuned", "gripper+s-reacher", lambda c: c.trpo.max_kl),
+        ("manager-k-tuned", "gripper+s-reacher", lambda c: c.macro.k),
+        ("manager-size-tuned", "gripper+s-reacher", lambda c: c.hidden),
+        ("micro-bounds-tuned", "gripper+reacher+micro", lambda c: c.macro.micro),
+    ):
+        cell = tuned[f"{base},c2=3,tr=0.03"].config
+        configs = [r.config for r in PRESETS[name].runs]
+        assert cell in configs and PRESETS[name].budget == PRESETS["reach-and-grip-2-tuned"].budget, name
+        assert len({repr(setting(c)) for c in configs}) == len(configs), name
+        for c in configs:
+            if name == "manager-kl-tuned":
+                c = replace(c, trpo=cell.trpo)
+            elif name == "manager-size-tuned":
+                c = replace(c, hidden=cell.hidden)
+            else:
+                c = replace(c, macro=cell.macro)
+            assert c == cell, name
 
 
 def test_runner_is_idempotent_resumable_and_tables_rebuild(tmp_path):
@@ -67,6 +86,34 @@ def test_runner_is_idempotent_resumable_and_tables_rebuild(tmp_path):
     files = build_tables(tmp_path, tmp_path / "results")
     table = (tmp_path / "results" / "tiny.md").read_text()
     assert "| normal | 2 |" in table and "| 0.5 |" in table and any(f.suffix == ".png" for f in files)
+
+
+def test_runner_copies_a_run_another_preset_finished_with_the_same_config(tmp_path):
+    first = _tiny("first")
+    reproduce(first, tmp_path, seeds=1, workers=1)
+    # "second" shares the Reacher cell (same config, another run name) and adds one the first never ran.
+    second = replace(
+        first,
+        name="second",
+        runs=(replace(first.runs[0], name="same", paper=0.7), Run("other", replace(first.runs[0].config, hidden=(8, 8)))),
+    )
+    results = {r["run"]: r for r in reproduce(second, tmp_path, seeds=1, workers=1)}
+    copied = results["same"]
+    assert copied["copied_from"] == "first/normal/s0" and copied["preset"] == "second" and copied["paper"] == 0.7
+    assert "copied_from" not in results["other"]
+    original = json.loads((tmp_path / "first" / "normal" / "s0" / "result.json").read_text())
+    on_disk = json.loads((tmp_path / "second" / "same" / "s0" / "result.json").read_text())
+    assert on_disk == copied and on_disk["success"] == original["success"] and on_disk["config"] == original["config"]
+    assert (tmp_path / "second" / "same" / "s0" / "checkpoint" / "weights.safetensors").is_file()
+    assert not list((tmp_path / "second" / "same").glob("*.copying"))
+    # A finished copy is skipped like any finished run; without reuse the cell is trained from scratch.
+    assert all(r["skipped"] for r in reproduce(second, tmp_path, seeds=1, workers=1))
+    third = replace(second, name="third")
+    fresh = {r["run"]: r for r in reproduce(third, tmp_path, seeds=1, workers=1, reuse=False)}
+    assert "copied_from" not in fresh["same"] and fresh["same"]["success"] == original["success"]
+    # A different budget is a different run: nothing to copy.
+    more = {r["run"]: r for r in reproduce(replace(second, name="fourth"), tmp_path, seeds=1, budget=120, workers=1)}
+    assert "copied_from" not in more["same"] and more["same"]["env_steps"] == 120
 
 
 def test_bootstrap_interval_and_bad_input(tmp_path):

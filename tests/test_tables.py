@@ -129,6 +129,9 @@ def test_sweep_x_reads_the_swept_value_from_each_presets_configs():
     assert xs("manager-k") == {"k=5": 5, "k=10": 10, "k=15": 15, "k=25": 25}
     assert xs("manager-size") == {"hidden=32": 32, "hidden=64": 64, "hidden=128": 128}
     assert set(xs("manager-kl").values()) == {0.003, 0.01, 0.03}
+    assert xs("manager-kl-tuned") == {"max_kl=0.005": 0.005, "max_kl=0.02": 0.02, "max_kl=0.08": 0.08}
+    assert xs("manager-k-tuned") == {"k=5": 5, "k=10": 10, "k=15": 15, "k=25": 25}
+    assert xs("manager-size-tuned") == {"hidden=32": 32, "hidden=64": 64, "hidden=128": 128}
     assert sweep_x("headline", {}) is None and sweep_x("manager-k", {"macro": None}) is None
 
 

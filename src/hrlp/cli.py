@@ -114,19 +114,29 @@ def reproduce(
     backend: Annotated[str, typer.Option(help="process (a local process pool) or ray (a Ray cluster).")] = "process",
     workers: Annotated[int, typer.Option(help="Runs at once on the process pool.")] = 2,
     address: Annotated[str | None, typer.Option(help="Ray cluster address (default: start a local Ray).")] = None,
+    reuse: Annotated[
+        bool, typer.Option(help="Copy a run whose config matches a finished run of another preset under OUT.")
+    ] = True,
 ) -> None:
-    """Run a preset's runs x seeds grid; finished runs are skipped, interrupted ones resume."""
+    """Run a preset's runs x seeds grid; finished runs are skipped, interrupted ones resume, runs another preset
+    already finished with the same config are copied."""
     from hrlp.checkpoint import CheckpointError
     from hrlp.experiments.runner import reproduce as run_grid
 
     def report(r: dict) -> None:
         s = r.get("success")
         what = f"success {s['mean']:.2f} [{s['low']:.2f}, {s['high']:.2f}]" if s else f"return {r['return']['mean']:.1f}"
-        note = " (already done)" if r.get("skipped") else f" in {r['wall_s'] / 60:.1f} min"
+        note = (
+            " (already done)"
+            if r.get("skipped")
+            else f" (copied from {r['copied_from']})"
+            if r.get("copied_from")
+            else f" in {r['wall_s'] / 60:.1f} min"
+        )
         err_console.print(f"{r['preset']} / {r['run']} / seed {r['seed']}: {what}, {r['env_steps']:,} steps{note}")
 
     try:
-        results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report)
+        results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse)
     except (ValueError, CheckpointError, ImportError) as e:
         raise _fail(str(e)) from None
     console.print(f"{len(results)} runs of {preset} in {out / preset}; tables: hrlp tables --root {out}")

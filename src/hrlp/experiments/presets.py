@@ -96,6 +96,61 @@ _FIG8_REWARD = {"tr": 0.08, "c2": 2.1}  # Figure 8's caption: tr 0.08, c1 -1, c2
 # Figure 5: reach-and-move TargetDistSum per Mover (rows) and Reacher (Normal, Stabilised, 3D).
 _FIG5 = {"mover-plain": (-52.778, -43.552, -56.989), "mover-noised": (-42.239, -41.470, -55.369)}
 
+#: The reward cell the tuned Appendix C sweeps run at: the environment's default (c2 3, tr 0.03), written out so
+#: that their base cell has the same config as the matching cell of ``reach-and-grip-2-tuned`` (and is reused from it).
+_BASE_CELL = {"c2": 3, "tr": 0.03}
+_MICRO_VARIANTS = (
+    ("free", MicroAction()),
+    ("torque<=0.3", MicroAction(max_torque=0.3)),
+    ("duration=5", MicroAction(duration=5)),
+    ("penalty=0.5", MicroAction(penalty=0.5)),
+)
+
+
+def _appendix_c_tuned() -> tuple[Preset, ...]:
+    """Appendix C's sweeps around the headline's Manager settings (2,000 decisions per batch, max KL 0.02, k = 15,
+    64 x 64 units), 3M steps per run. The KL, k and size sweeps use gripper + s-reacher, whose seeds agree within
+    0.12 in Figure 7's grid, so that a sweep can rank its settings; the micro-action sweep uses gripper + reacher +
+    micro, the skill set whose Managers abandon the Reacher (Section 4.3.1)."""
+    base = replace(_tuned_manager(("gripper", "s-reacher"), False), task_kwargs=_BASE_CELL)
+    micro_base = replace(_tuned_manager(("gripper", "reacher"), True), task_kwargs=_BASE_CELL)
+    what = "Appendix C at the headline's Manager settings: gripper + s-reacher (Experiment 2, c2 3, tr 0.03)"
+    return (
+        Preset(
+            "manager-kl-tuned",
+            f"{what} over the maximal KL",
+            "Appendix C",
+            tuple(Run(f"max_kl={kl:g}", replace(base, trpo=_kl(kl))) for kl in (0.005, 0.02, 0.08)),
+            budget=3_000_000,
+        ),
+        Preset(
+            "manager-k-tuned",
+            f"{what} over the macro length k",
+            "Appendix C",
+            tuple(Run(f"k={k}", replace(base, macro=replace(base.macro, k=k))) for k in (5, 10, 15, 25)),  # type: ignore[type-var]
+            budget=3_000_000,
+        ),
+        Preset(
+            "manager-size-tuned",
+            f"{what} over its hidden layer width",
+            "Appendix C",
+            tuple(Run(f"hidden={h}", replace(base, hidden=(h, h))) for h in (32, 64, 128)),
+            budget=3_000_000,
+        ),
+        Preset(
+            "micro-bounds-tuned",
+            "Appendix C at the headline's Manager settings: gripper + reacher + micro (Experiment 2, c2 3, tr 0.03) with "
+            "bounded or penalised micro-actions",
+            "Appendix C",
+            tuple(
+                Run(name, replace(micro_base, macro=MacroSpec(("gripper", "reacher"), k=15, micro=micro)))
+                for name, micro in _MICRO_VARIANTS
+            ),
+            budget=3_000_000,
+        ),
+    )
+
+
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
@@ -272,13 +327,9 @@ PRESETS: dict[str, Preset] = {
                         macro=MacroSpec(("gripper", "reacher"), k=15, micro=micro),
                     ),
                 )
-                for name, micro in (
-                    ("free", MicroAction()),
-                    ("torque<=0.3", MicroAction(max_torque=0.3)),
-                    ("duration=5", MicroAction(duration=5)),
-                    ("penalty=0.5", MicroAction(penalty=0.5)),
-                )
+                for name, micro in _MICRO_VARIANTS
             ),
         ),
+        *_appendix_c_tuned(),
     )
 }

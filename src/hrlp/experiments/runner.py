@@ -3,13 +3,16 @@
 Each run lives in ``OUT/PRESET/RUN/sSEED``: the training run (checkpoint, logs) and, once it is
 finished and evaluated, ``result.json``. Runs with a result for at least the requested budget are
 skipped; interrupted runs resume from their checkpoints; a larger ``--budget`` continues finished
-runs. Every job trains in its own process with one torch thread.
+runs. A run whose full config (seed and budget included) matches a finished run of another preset under the
+same ``OUT`` is copied from it instead of trained again: training is deterministic given the config, so the copy
+is the run this job would have made. Every job trains in its own process with one torch thread.
 """
 
 from __future__ import annotations
 
 import json
 import re
+import shutil
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -74,8 +77,39 @@ def training_seconds(progress: dict[str, np.ndarray]) -> float:
     return float(np.sum(steps / progress["time/steps_per_s"]))
 
 
-def run_job(job: Job) -> dict[str, Any]:
-    """Train (or resume) and evaluate one job, write ``result.json`` atomically and return it; skip if done."""
+def find_same_run(job: Job) -> Path | None:
+    """A finished run of another preset or run name under the same root whose config equals ``job``'s, or None."""
+    root = job.run_dir.parents[2]
+    want = json.loads(json.dumps(job.config.to_json()))  # tuples -> lists, as read back from result.json
+    for path in sorted(root.glob(f"*/*/s{job.seed}/result.json")):
+        if path.parent == job.run_dir:
+            continue
+        try:
+            found = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError):
+            continue
+        if found.get("config") == want and found.get("env_steps", 0) >= job.config.steps:
+            return path.parent
+    return None
+
+
+def copy_run(job: Job, source: Path) -> dict[str, Any]:
+    """Copy the finished run ``source`` into ``job.run_dir`` (atomically: a temporary sibling, then a rename) with its
+    result relabelled to ``job``'s preset and run, and return that result."""
+    result = {**read_result(source), "preset": job.preset, "run": job.run, "paper": job.paper}  # type: ignore[dict-item]
+    result["copied_from"] = str(source.relative_to(job.run_dir.parents[2]))
+    job.run_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = job.run_dir.with_name(job.run_dir.name + ".copying")
+    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.copytree(source, tmp)
+    _write_json(tmp / "result.json", result)
+    tmp.rename(job.run_dir)
+    return result
+
+
+def run_job(job: Job, reuse: bool = True) -> dict[str, Any]:
+    """Train (or resume) and evaluate one job, write ``result.json`` atomically and return it; skip if done, copy
+    if ``reuse`` and another preset under the same root has finished the same run (:func:`find_same_run`)."""
     import torch
 
     from hrlp.evaluate import evaluate_run
@@ -85,6 +119,8 @@ def run_job(job: Job) -> dict[str, Any]:
     done = read_result(job.run_dir)
     if done is not None and done["env_steps"] >= job.config.steps:
         return {**done, "skipped": True}
+    if reuse and not job.run_dir.exists() and (source := find_same_run(job)) is not None:
+        return copy_run(job, source)
     torch.set_num_threads(1)
     resume = (job.run_dir / "checkpoint").exists()
     for _ in train(job.config, job.run_dir, resume=resume):
@@ -125,9 +161,11 @@ def reproduce(
     workers: int = 2,
     address: str | None = None,
     on_result: Callable[[dict[str, Any]], None] | None = None,
+    reuse: bool = True,
 ) -> list[dict[str, Any]]:
     """Run every job of the preset (a name or a :class:`Preset`; its first ``seeds`` seeds, ``budget`` steps each)
-    and return their results.
+    and return their results. With ``reuse``, a job whose config matches a finished run of another preset under
+    ``out`` is copied from it (:func:`find_same_run`) rather than trained again.
 
     Raises ValueError for an unknown preset, backend or bad numbers, and for a missing skill, before any compute.
     """
@@ -149,7 +187,7 @@ def reproduce(
 
         ray.init(address=address, ignore_reinit_error=True, include_dashboard=False, log_to_driver=False)
         remote = ray.remote(num_cpus=1)(run_job)
-        pending = {remote.remote(j): j for j in jobs}
+        pending = {remote.remote(j, reuse): j for j in jobs}
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
             res = ray.get(ready[0])
@@ -161,7 +199,7 @@ def reproduce(
     import multiprocessing as mp
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        futures = [pool.submit(run_job, j) for j in jobs]
+        futures = [pool.submit(run_job, j, reuse) for j in jobs]
         for f in as_completed(futures):
             res = f.result()
             results.append(res)

@@ -79,9 +79,15 @@ SWEEPS: dict[str, SweepAxis] = {
     # Figure 8's axis is 10^5 * alpha: the angle the curriculum reaches after 10^5 episodes.
     "reach-and-grip-2-flat": SweepAxis("10⁵·α", lambda c: 1e5 * c["task_kwargs"]["curriculum_alpha"], log=True),
     "reach-and-grip-2-flat-kl": SweepAxis("max KL", lambda c: c["trpo"]["max_kl"], log=True),
-    "manager-kl": SweepAxis("max KL", lambda c: c["trpo"]["max_kl"], log=True),
-    "manager-k": SweepAxis("macro-action length k", lambda c: c["macro"]["k"]),
-    "manager-size": SweepAxis("hidden layer width", lambda c: c["hidden"][0], log=True),
+    **{
+        name + tuned: axis
+        for name, axis in (
+            ("manager-kl", SweepAxis("max KL", lambda c: c["trpo"]["max_kl"], log=True)),
+            ("manager-k", SweepAxis("macro-action length k", lambda c: c["macro"]["k"])),
+            ("manager-size", SweepAxis("hidden layer width", lambda c: c["hidden"][0], log=True)),
+        )
+        for tuned in ("", "-tuned")
+    },
 }
 
 
