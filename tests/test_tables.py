@@ -205,6 +205,24 @@ def test_grid_lines_lay_runs_out_as_the_papers_figure():
         grid_lines({"no-comma": ("0", None)})
 
 
+def test_manager_tables_show_skill_usage_and_mark_copied_runs(tmp_path):
+    root, out = tmp_path / "runs", tmp_path / "results"
+    for seed, usage in ((0, {"gripper": 0.7, "reacher": 0.1, "micro": 0.2}), (1, {"gripper": 0.5, "micro": 0.5})):
+        _write_run(root, "micro-bounds-tuned", "free", seed, 0.2, [0.1, 0.2])
+        path = root / "micro-bounds-tuned" / "free" / f"s{seed}" / "result.json"
+        path.write_text(json.dumps({**json.loads(path.read_text()), "macro_usage": usage, "copied_from": "other/x/s0"}))
+    _write_run(root, "micro-bounds-tuned", "duration=5", 0, 0.3, [0.1, 0.2])
+    _write_run(root, "reachers", "Reacher", 0, 0.9, [0.1, 0.2])
+    build_tables(root, out)
+    md = (out / "micro-bounds-tuned.md").read_text()
+    assert "| decisions per skill (mean over seeds) |" in md and "Runs marked * were copied from `other`" in md
+    assert "| free* | 2 |" in md and md.count("| gripper 60%, reacher 5%, micro 35% |") == 1
+    row = next(line for line in md.splitlines() if line.startswith("| duration=5 |"))  # the main table comes first
+    assert row.endswith("| 0.02 | - |")  # wall time, then no usage recorded
+    flat = (out / "reachers.md").read_text()
+    assert "decisions per skill" not in flat and "copied" not in flat
+
+
 def test_figure_7_presets_get_the_grid_layout(tmp_path):
     root, out = tmp_path / "runs", tmp_path / "results"
     _write_run(root, "reach-and-grip-2-tuned", "gripper+micro,c2=3,tr=0.06", 0, 0.875, [0.1, 0.5])

@@ -183,9 +183,10 @@ PRESETS: dict[str, Preset] = {
         ),
         Preset(
             "movers",
-            "Mover Plain (small start set) and Noised (large start set)",
+            "Mover Plain (small start set) and Noised (large start set), from grip starts, with the shipped Movers' "
+            "settings (100-step episodes, initial log std -1)",
             "Section 4.1, Experiment 2",
-            tuple(Run(t, _flat(t, 25_000)) for t in ("MoverPlain", "MoverNoised")),
+            tuple(Run(t, _flat(t, 25_000, episode_steps=100, init_log_std=-1.0)) for t in ("MoverPlain", "MoverNoised")),
             metric="target_dist_sum",
             budget=4_000_000,
         ),

@@ -49,6 +49,15 @@ def metric_value(result: dict[str, Any], metric: str) -> float | None:
     return None if v is None else float(v["mean"])
 
 
+def usage_cell(results: list[dict[str, Any]]) -> str:
+    """A Manager run's share of decisions per skill, mean over its seeds (``gripper 71%, micro 29%``); '-' for flat."""
+    usages = [r["macro_usage"] for r in results if r.get("macro_usage")]
+    if not usages:
+        return "-"
+    names = dict.fromkeys(n for u in usages for n in u)
+    return ", ".join(f"{n} {100 * sum(u.get(n, 0.0) for u in usages) / len(usages):.0f}%" for n in names)
+
+
 def collect(root: Path) -> dict[str, dict[str, list[tuple[Path, dict[str, Any]]]]]:
     """``{preset: {run: [(run_dir, result), ...]}}`` for every ``result.json`` under ``root``."""
     out: dict[str, dict[str, list[tuple[Path, dict[str, Any]]]]] = defaultdict(lambda: defaultdict(list))
@@ -358,8 +367,19 @@ def build_tables(
             + (f", `{preset_name}_scatter.png` (the metric against {axis.label}, one dot per seed)" if axis else "")
             + ".",
             "",
-            "| run | seeds | ours | paper | env steps per run | wall time (h, all seeds) |",
-            "|---|---:|---|---:|---:|---:|",
+        ]
+        managers = any(r.get("macro_usage") for name in order for _, r in runs[name])
+        copied = sorted({r["copied_from"].split("/")[0] for name in order for _, r in runs[name] if r.get("copied_from")})
+        if copied:
+            lines += [
+                f"Runs marked * were copied from {', '.join(f'`{c}`' for c in copied)} (same config and seed); their "
+                "wall time is that of the original runs.",
+                "",
+            ]
+        lines += [
+            "| run | seeds | ours | paper | env steps per run | wall time (h, all seeds) |"
+            + (" decisions per skill (mean over seeds) |" if managers else ""),
+            "|---|---:|---|---:|---:|---:|" + ("---|" if managers else ""),
         ]
         grid: dict[str, tuple[str, float | None]] = {}
         for name in order:
@@ -374,7 +394,9 @@ def build_tables(
             paper_cell = "-" if paper is None else f"{paper:g}"
             steps_cell = ", ".join(f"{s:,}" for s in steps)
             ours = f"{_g(m)} [{_g(lo)}, {_g(hi)}]"
-            lines.append(f"| {name} | {len(results)} | {ours} | {paper_cell} | {steps_cell} | {wall:.2f} |")
+            star = "*" if any(r.get("copied_from") for r in results) else ""
+            row = f"| {name}{star} | {len(results)} | {ours} | {paper_cell} | {steps_cell} | {wall:.2f} |"
+            lines.append(row + (f" {usage_cell(results)} |" if managers else ""))
             grid[name] = (_g(m), paper)
         if preset_name in GRIDS:
             lines += ["", f"The same as the paper's figure lays it out: {metric.replace('_', ' ')}, ours (paper's).", ""]
