@@ -111,6 +111,12 @@ def test_runner_copies_a_run_another_preset_finished_with_the_same_config(tmp_pa
     third = replace(second, name="third")
     fresh = {r["run"]: r for r in reproduce(third, tmp_path, seeds=1, workers=1, reuse=False)}
     assert "copied_from" not in fresh["same"] and fresh["same"]["success"] == original["success"]
+    # A copy of a copy names the run that was trained (with first's result hidden, second's copy is found first).
+    hidden = tmp_path / "first" / "normal" / "s0" / "result.json"
+    hidden.rename(hidden.with_suffix(".hidden"))
+    fifth = {r["run"]: r for r in reproduce(replace(second, name="fifth", runs=second.runs[:1]), tmp_path, seeds=1)}
+    assert fifth["same"]["copied_from"] == "first/normal/s0"
+    hidden.with_suffix(".hidden").rename(hidden)
     # A different budget is a different run: nothing to copy.
     more = {r["run"]: r for r in reproduce(replace(second, name="fourth"), tmp_path, seeds=1, budget=120, workers=1)}
     assert "copied_from" not in more["same"] and more["same"]["env_steps"] == 120

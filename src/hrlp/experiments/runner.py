@@ -96,8 +96,11 @@ def find_same_run(job: Job) -> Path | None:
 def copy_run(job: Job, source: Path) -> dict[str, Any]:
     """Copy the finished run ``source`` into ``job.run_dir`` (atomically: a temporary sibling, then a rename) with its
     result relabelled to ``job``'s preset and run, and return that result."""
-    result = {**read_result(source), "preset": job.preset, "run": job.run, "paper": job.paper}  # type: ignore[dict-item]
-    result["copied_from"] = str(source.relative_to(job.run_dir.parents[2]))
+    found = read_result(source)
+    assert found is not None
+    result = {**found, "preset": job.preset, "run": job.run, "paper": job.paper}
+    # A copy of a copy names the run that was trained.
+    result["copied_from"] = found.get("copied_from") or str(source.relative_to(job.run_dir.parents[2]))
     job.run_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = job.run_dir.with_name(job.run_dir.name + ".copying")
     shutil.rmtree(tmp, ignore_errors=True)
