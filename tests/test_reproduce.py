@@ -34,6 +34,13 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
             if key not in built:
                 env_factory(c.task, c.episode_steps, c.macro, c.trpo.gamma, **c.task_kwargs)().close()
                 built.add(key)
+    # Figure 6 is Experiment 1's Manager over the Gripper reward's grid ("Table 6 presents results of Experiment 1");
+    # the paper gives no success rate for the flat Gripper.
+    fig6 = {r.name: r.paper for r in PRESETS["reach-and-grip-1"].runs}
+    assert fig6["gripper+reacher,c2=3,tr=0.03"] == 0.984 and fig6["gripper+reacher,c2=4,tr=0.06"] == 0.902
+    assert {r.name: r.paper for r in PRESETS["reach-and-grip-1-tuned"].runs} == fig6
+    assert all(r.config.macro.k == 10 and r.config.task == "ReachAndGrip1" for r in PRESETS["reach-and-grip-1"].runs)
+    assert all(r.paper is None for r in PRESETS["gripper-grid"].runs)
     fig7 = {r.name: r.paper for r in PRESETS["reach-and-grip-2"].runs}
     assert fig7["gripper+micro,c2=3,tr=0.03"] == 0.86 and fig7["gripper+s-reacher,c2=4,tr=0.06"] == 0.70
     # The tuned grid differs from Figure 7's only in the Manager's batch and maximal KL, and its headline cell is

@@ -280,8 +280,9 @@ class ReacherTask(Task):
 class GripReward:
     """The Gripper's reward (Section 4.1, Experiment 1): c1 d(H,C) + c2 1[d(H,C) < tr] + c3 d(FT1,FT2).
 
-    Requires c1, c3 < 0 < c2 and tr > 0. Defaults are the best cell of the paper's grid
-    (Figure 6: c2 = 3, tr = 0.03) with the flat runs' c1 = -1 and c3 = -4 (Section 4.3.2).
+    Requires c1, c3 < 0 < c2 and tr > 0. Defaults: c2 = 3, tr = 0.03, the cell of the paper's grid
+    (Figures 6 and 7) where three of Figure 7's four Managers score highest, with the flat runs' c1 = -1
+    and c3 = -4 (Section 4.3.2).
     An optional fourth term, ``c4 1[Definition 1 holds now]`` (c4 >= 0, default 0: the paper's
     reward), pays for the gripped state itself; the shipped Gripper skill trains with it.
     """
