@@ -66,10 +66,20 @@ def _manager(task: str, skills: tuple[str, ...], k: int, micro: bool = False, **
     return TrainConfig(task=task, batch_steps=5_000, num_envs=16, macro=spec, **kw)  # type: ignore[arg-type]
 
 
+def _tuned(config: TrainConfig) -> TrainConfig:
+    """A Manager's config with the demo's settings: 2,000 decisions per batch and max KL 0.02 (more, larger updates
+    than the paper's 5,000 decisions and 0.01 at the budgets one machine affords)."""
+    return replace(config, batch_steps=2_000, trpo=_kl(0.02))
+
+
 def _tuned_manager(skills: tuple[str, ...], micro: bool) -> TrainConfig:
-    """A reach-and-grip-2 Manager with the demo's settings: 2,000 decisions per batch and max KL 0.02 (more,
-    larger updates than the paper's 5,000 decisions and 0.01 at the budgets one machine affords)."""
-    return replace(_manager("ReachAndGrip2", skills, 15, micro), batch_steps=2_000, trpo=_kl(0.02))
+    """A reach-and-grip-2 Manager (k = 15) with the demo's settings (:func:`_tuned`)."""
+    return _tuned(_manager("ReachAndGrip2", skills, 15, micro))
+
+
+def _experiment_1(c2: float, tr: float) -> TrainConfig:
+    """reach-and-grip Experiment 1 at one cell of Figure 6: a Manager over gripper + reacher, k = 10."""
+    return _manager("ReachAndGrip1", ("gripper", "reacher"), 10, task_kwargs={"c2": c2, "tr": tr})
 
 
 def _kl(max_kl: float) -> TRPOConfig:
@@ -144,7 +154,7 @@ def _appendix_c_tuned() -> tuple[Preset, ...]:
             "bounded or penalised micro-actions",
             "Appendix C",
             tuple(
-                Run(name, replace(micro_base, macro=MacroSpec(("gripper", "reacher"), k=15, micro=micro)))
+                Run(name, replace(micro_base, macro=replace(micro_base.macro, micro=micro)))  # type: ignore[type-var]
                 for name, micro in _MICRO_VARIANTS
             ),
             budget=3_000_000,
@@ -214,14 +224,7 @@ PRESETS: dict[str, Preset] = {
             "reach-and-grip Experiment 1 (capsule fixed), Manager over gripper + reacher, k = 10, over the Gripper "
             "reward's c2 x tr",
             "Section 4.3.1, Figure 6",
-            tuple(
-                Run(
-                    f"gripper+reacher,c2={c2},tr={tr}",
-                    _manager("ReachAndGrip1", ("gripper", "reacher"), 10, task_kwargs={"c2": c2, "tr": tr}),
-                    _FIG6[(c2, tr)],
-                )
-                for c2, tr in _GRID
-            ),
+            tuple(Run(f"gripper+reacher,c2={c2},tr={tr}", _experiment_1(c2, tr), _FIG6[(c2, tr)]) for c2, tr in _GRID),
             # "every experiment required 1 million of samples ... 5 to 10 millions of interactions" (Section 4.3.1)
             budget=10_000_000,
         ),
@@ -230,18 +233,7 @@ PRESETS: dict[str, Preset] = {
             "Figure 6's grid (Experiment 1, gripper + reacher, k = 10, c2 x tr) with the headline's Manager settings: "
             "2,000 decisions per batch and max KL 0.02 instead of the paper's 5,000 and 0.01",
             "Section 4.3.1, Figure 6",
-            tuple(
-                Run(
-                    f"gripper+reacher,c2={c2},tr={tr}",
-                    replace(
-                        _manager("ReachAndGrip1", ("gripper", "reacher"), 10, task_kwargs={"c2": c2, "tr": tr}),
-                        batch_steps=2_000,
-                        trpo=_kl(0.02),
-                    ),
-                    _FIG6[(c2, tr)],
-                )
-                for c2, tr in _GRID
-            ),
+            tuple(Run(f"gripper+reacher,c2={c2},tr={tr}", _tuned(_experiment_1(c2, tr)), _FIG6[(c2, tr)]) for c2, tr in _GRID),
             budget=3_000_000,
         ),
         Preset(
