@@ -13,7 +13,6 @@ Runs already finished in ``--out`` are reused, so an interrupted comparison cont
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -21,19 +20,21 @@ from pathlib import Path
 def _run(kind: str, seed: int, steps: int, out: Path, episodes: int, flat_batch: int) -> tuple[str, int, int, int, float]:
     import torch
 
+    from hrlp.algos.trpo import TRPOConfig
+    from hrlp.checkpoint import checkpoint_exists
     from hrlp.evaluate import evaluate_run
-    from hrlp.experiments.demo import demo_config
     from hrlp.skills.macro_env import MacroSpec
     from hrlp.train import TrainConfig, train
 
     torch.set_num_threads(1)
     run = out / f"{kind}-s{seed}"
     if kind == "manager":
-        # The demo's settings over the Gripper and the parameterised Reacher (the demo itself now uses micro-actions).
-        cfg = dataclasses.replace(demo_config(steps, seed, workers=1), macro=MacroSpec(("gripper", "reacher"), k=15))
+        # The headline's Manager settings (2,000 decisions per batch, max KL 0.02) over the Gripper and the Reacher, k = 15.
+        cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=2_000, num_envs=16, seed=seed,
+                          macro=MacroSpec(("gripper", "reacher"), k=15), trpo=TRPOConfig(max_kl=0.02))  # fmt: skip
     else:
         cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=flat_batch, num_envs=16, seed=seed)
-    resume = (run / "checkpoint").exists()
+    resume = checkpoint_exists(run / "checkpoint")
     for _ in train(cfg, run, resume=resume):
         pass
     ev = evaluate_run(run, episodes=episodes)

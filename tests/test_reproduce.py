@@ -11,6 +11,7 @@ from hrlp.experiments.presets import PRESETS, Preset, Run
 from hrlp.experiments.runner import plan, reproduce, training_seconds
 from hrlp.experiments.tables import bootstrap_interval, build_tables
 from hrlp.plots import read_progress
+from hrlp.skills.macro_env import Handover
 from hrlp.train import TrainConfig, env_factory
 
 
@@ -23,8 +24,10 @@ def _tiny(name="tiny"):
 def test_every_preset_builds_valid_configs_with_distinct_run_names():
     for p in PRESETS.values():
         assert len({r.name for r in p.runs}) == len(p.runs), p.name
+        own = {r.name: r.steps for r in p.runs}
         for job in plan(p, __import__("pathlib").Path("out")):
-            assert job.config.steps == p.budget and job.config.seed in p.seeds
+            assert job.config.steps == (own[job.run] or p.budget) and job.config.seed in p.seeds
+        assert all(job.config.steps == 123 for job in plan(p.with_budget(123), __import__("pathlib").Path("out")))
     # Every environment a preset trains in can be built: its task arguments are valid and its skills are shipped.
     built = set()
     for p in PRESETS.values():
@@ -53,6 +56,22 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     assert replace(tuned_cell, batch_steps=paper_cell.batch_steps, trpo=paper_cell.trpo) == paper_cell
     headline = next(r for r in PRESETS["headline"].runs if r.name == "manager:gripper+micro").config
     assert replace(tuned["gripper+micro,c2=3,tr=0.03"].config, task_kwargs={}) == headline
+    # The hand-over grids differ from the tuned ones only in driving the Reacher for hand-over and the parameters'
+    # initial spread; every preset without "handover" in its name runs its skills as the paper does.
+    tuned_1 = {r.name: r.config for r in PRESETS["reach-and-grip-1-tuned"].runs}
+    for name, base in (
+        ("reach-and-grip-1-handover", tuned_1),
+        ("reach-and-grip-2-handover", {n: r.config for n, r in tuned.items()}),
+    ):
+        runs = PRESETS[name].runs
+        assert {r.name for r in runs} <= set(base) and not any(r.name.startswith("gripper+micro,") for r in runs)
+        for r in runs:
+            assert r.config.macro.handover == Handover() and r.config.init_log_std == -1.0, name
+            assert replace(r.config, macro=replace(r.config.macro, handover=None), init_log_std=0.0) == base[r.name], name
+            assert r.paper == (fig6 if "-1-" in name else fig7)[r.name]
+    assert len(PRESETS["reach-and-grip-2-handover"].runs) == 12
+    assert all(r.config.macro is None or r.config.macro.handover is None
+               for p in PRESETS.values() if "handover" not in p.name for r in p.runs)  # fmt: skip
     # Each tuned Appendix C sweep changes one setting of one cell of the tuned grid, and includes that cell itself.
     for name, base, setting in (
         ("manager-kl-tuned", "gripper+s-reacher", lambda c: c.trpo.max_kl),

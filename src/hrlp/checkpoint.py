@@ -16,10 +16,17 @@ so the renames below stay on one file system), each file and the directory are f
 
 A process killed at any moment therefore leaves a complete ``NAME/`` (old or new), or -- killed between steps 1 and 2 --
 no ``NAME/`` but a complete ``.NAME.old-XXXX/``. Readers handle that state without writing anything:
-:func:`resolve_checkpoint` points them at the ``.old`` copy. The next :func:`save_checkpoint` repairs it (renames the
-``.old`` copy back) and deletes leftover ``.tmp``/``.old`` siblings before it writes. Readers never modify the
-file system, so an evaluator may load while a trainer saves; both files are opened through one directory handle, so a
-reader never pairs the weights of one checkpoint with the metadata of another.
+:func:`resolve_checkpoint` points them at the ``.old`` copy, and :func:`checkpoint_exists` -- what every entry point
+asks before it decides between a fresh run and a resumed one -- counts it as a checkpoint. The next
+:func:`save_checkpoint` repairs it (renames the ``.old`` copy back) and deletes leftover ``.tmp``/``.old`` siblings
+before it writes. That repair, like the whole save, runs under the parent directory's lock
+(:func:`hrlp.atomic.directory_lock`, which a training run holds for its whole length), so a writer never deletes the
+temporary directory of another writer's save in progress: a second writer fails at once with a one-line error
+instead. Readers never modify the file system, so an evaluator may load while a trainer saves; both files are opened
+through one directory handle, so a reader never pairs the weights of one checkpoint with the metadata of another.
+
+A file system error while saving (full disk, read-only directory) raises :class:`hrlp.atomic.StorageError` (one line
+naming the checkpoint); the previous checkpoint stays as it was.
 
 Random-number generators are stored through :func:`pack_generators` / :func:`unpack_generators` (numpy bit-generator
 states in JSON, torch generator states as uint8 tensors), and modules through :func:`module_tensors` /
@@ -47,6 +54,8 @@ import safetensors.torch
 import torch
 from safetensors import SafetensorError
 
+from hrlp.atomic import StorageError, directory_lock
+
 FORMAT_VERSION = 1
 WEIGHTS_FILE = "weights.safetensors"
 META_FILE = "meta.json"
@@ -68,14 +77,27 @@ def save_checkpoint(directory: Path, tensors: Mapping[str, torch.Tensor], meta: 
     must be a checkpoint (only ``weights.safetensors`` and ``meta.json``) or empty, so a mistyped path never deletes
     someone's files. Tensors are detached, copied to contiguous CPU memory (tied weights become separate copies).
     Raises ``TypeError`` for a non-tensor value, ``ValueError`` for meta that is not strict JSON, both before
-    anything is written.
+    anything is written; :class:`hrlp.atomic.DirectoryLockedError` if another process holds the lock of the parent
+    directory; :class:`hrlp.atomic.StorageError` (one line naming ``directory``) if the file system refuses the write,
+    leaving the previous checkpoint as it was.
     """
     directory = Path(directory)
     weights_bytes = _serialise_tensors(tensors)
     meta_bytes = _serialise_meta(weights_bytes, sorted(tensors), meta)
+    with directory_lock(directory.parent, "directory"):
+        had_previous = checkpoint_exists(directory)
+        note = "the previous checkpoint is unchanged" if had_previous else ""
+        try:
+            return _save_locked(directory, weights_bytes, meta_bytes)
+        except StorageError as error:
+            raise StorageError(directory, error, note) from error
+        except OSError as error:
+            raise StorageError(directory, error, note) from error
 
+
+def _save_locked(directory: Path, weights_bytes: bytes, meta_bytes: bytes) -> Path:
+    """The save protocol (module docstring), run under the parent directory's lock."""
     parent = directory.parent
-    parent.mkdir(parents=True, exist_ok=True)
     _recover(directory)
     _check_replaceable(directory)
 
@@ -171,6 +193,18 @@ def _check_replaceable(directory: Path) -> None:
 
 
 # --- loading --------------------------------------------------------------------------------------------------------
+
+
+def checkpoint_exists(directory: Path) -> bool:
+    """Whether ``directory`` holds a checkpoint to continue from: ``directory`` itself, or the complete ``.old`` copy
+    a save killed between its two renames leaves (exactly what :func:`resolve_checkpoint` and :func:`load_checkpoint`
+    read). Every entry point that chooses between a fresh run and a resumed one asks this, so none of them mistakes
+    that state for an empty directory."""
+    try:
+        resolve_checkpoint(directory)
+    except CheckpointError:
+        return Path(directory).exists()  # something is there (not a checkpoint): never treat it as empty
+    return True
 
 
 def resolve_checkpoint(directory: Path) -> Path:

@@ -72,7 +72,7 @@ def render(
 @app.command()
 def demo(
     out_dir: Annotated[Path, typer.Option(help="Run directory (run again to continue it).")] = Path("runs/demo"),
-    steps: Annotated[int, typer.Option(help="Low-level environment steps of Manager training.")] = 3_000_000,
+    steps: Annotated[int, typer.Option(help="Low-level environment steps of Manager training.")] = 1_000_000,
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
     episodes: Annotated[int, typer.Option(help="Evaluation episodes for the success rate.")] = 100,
     video_steps: Annotated[int, typer.Option(help="Low-level steps in the video (default: one episode).")] = 0,
@@ -145,21 +145,34 @@ def reproduce(
 @app.command()
 def tables(
     root: Annotated[Path, typer.Option(help="Root of the runs written by 'hrlp reproduce'.")] = Path("runs/reproduce"),
-    out: Annotated[Path, typer.Option(help="Directory for the markdown tables and PNG plots.")] = Path("docs/results"),
+    out: Annotated[
+        Path | None, typer.Option(help="Directory for the markdown tables and PNG plots (default ROOT/tables).")
+    ] = None,
     threshold: Annotated[
         list[float] | None,
         typer.Option(help="Training success rate for the sample-efficiency table; repeatable (default 0.05, 0.1, 0.2)."),
     ] = None,
     window: Annotated[int, typer.Option(help="Iterations in the moving average of the training success rate.")] = 3,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace files in --out that 'hrlp tables' did not write there (e.g. committed results).")
+    ] = False,
 ) -> None:
     """Rebuild the paper's tables (ours beside the paper's numbers), learning curves, sweep scatter plots and
-    sample-efficiency tables from run directories."""
-    from hrlp.experiments.tables import DEFAULT_THRESHOLDS, build_tables
+    sample-efficiency tables from run directories.
 
+    Files it wrote before (recorded in OUT/.hrlp-tables.json) are replaced; any other file is replaced only with
+    --overwrite."""
+    from hrlp.atomic import StorageError
+    from hrlp.experiments.tables import DEFAULT_THRESHOLDS, build_tables, default_out
+
+    out = default_out(root) if out is None else out
     try:
-        files = build_tables(root, out, thresholds=tuple(threshold) if threshold else DEFAULT_THRESHOLDS, window=window)
-    except ValueError as e:
+        files = build_tables(root, out, thresholds=tuple(threshold) if threshold else DEFAULT_THRESHOLDS, window=window,
+                             overwrite=overwrite)  # fmt: skip
+    except (ValueError, StorageError) as e:
         raise _fail(str(e)) from None
+    except OSError as e:
+        raise _fail(_os_error_line(e, out)) from None
     for f in files:
         console.print(f"wrote {f}")
 
@@ -178,6 +191,7 @@ def theory(
     run_theory(mdps=mdps, seed=seed, out_dir=out, console=console)
 
 
+_DEFAULT_STEPS = 1_000_000
 _STEPS = Annotated[int | None, typer.Option(help="Low-level environment steps in total (default 1,000,000).")]
 _SEED = Annotated[int, typer.Option(help="Seed of environments, network and action noise.")]
 _RUN_DIR = Annotated[Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).")]
@@ -205,6 +219,7 @@ _RESUME = Annotated[
 
 @app.command()
 def train(
+    ctx: typer.Context,
     task: Annotated[str, typer.Argument(help="hrlp task (see 'hrlp tasks') or a Gymnasium id.")],
     steps: _STEPS = None,
     seed: _SEED = 0,
@@ -223,14 +238,16 @@ def train(
     resume: _RESUME = False,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
-    settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
-                    episode_steps=episode_steps, init_log_std=init_log_std, workers=workers,
+    settings = dict(task=task, steps=_DEFAULT_STEPS if steps is None else steps, seed=seed, batch_steps=batch_steps,
+                    num_envs=num_envs, episode_steps=episode_steps, init_log_std=init_log_std, workers=workers,
                     value_iters=value_iters, value_fraction=value_fraction)  # fmt: skip
-    _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps)
+    _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps,
+           ctx)  # fmt: skip
 
 
 @app.command("train-manager")
 def train_manager(
+    ctx: typer.Context,
     task: Annotated[str, typer.Argument(help="hrlp task the Manager solves, e.g. ReachAndGrip2.")],
     skills: Annotated[
         str, typer.Option(help="Comma-separated skill names (see 'hrlp skills list'), e.g. gripper,reacher.")
@@ -241,6 +258,13 @@ def train_manager(
     micro_max_torque: Annotated[float, typer.Option(help="Torque bound of the micro-action, in (0, 1].")] = 1.0,
     k: Annotated[int | None, typer.Option(help="Low-level steps per skill call (default: each skill's own k).")] = None,
     library: Annotated[Path | None, typer.Option(help="Skill library searched first.")] = None,
+    handover: Annotated[
+        bool,
+        typer.Option(
+            help="Drive Reachers for hand-over: goals relative to the capsule, approach from above, claw held "
+            "open (docs/skills.md); off: the paper's absolute goals, skills run as trained."
+        ),
+    ] = False,
     steps: _STEPS = None,
     seed: _SEED = 0,
     run_dir: _RUN_DIR = None,
@@ -258,18 +282,21 @@ def train_manager(
     resume: _RESUME = False,
 ) -> None:
     """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration."""
-    from hrlp.skills.macro_env import MacroSpec, MicroAction
+    from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 
     try:
         names = tuple(s.strip() for s in skills.split(",") if s.strip())
         m = MicroAction(micro_duration, micro_penalty, micro_max_torque) if micro else None
-        spec = MacroSpec(names, k, m, None if library is None else str(library))
+        spec = MacroSpec(names, k, m, None if library is None else str(library), Handover() if handover else None)
     except ValueError as e:
-        raise _fail(str(e)) from None
-    settings = dict(task=task, steps=steps or 1_000_000, seed=seed, batch_steps=batch_steps, num_envs=num_envs,
-                    episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec,
+        if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
+            raise _fail(str(e)) from None
+        spec = None
+    settings = dict(task=task, steps=_DEFAULT_STEPS if steps is None else steps, seed=seed, batch_steps=batch_steps,
+                    num_envs=num_envs, episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec,
                     value_iters=value_iters, value_fraction=value_fraction)  # fmt: skip
-    _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps)
+    _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps,
+           ctx)  # fmt: skip
 
 
 def parse_task_args(items: list[str] | None) -> dict[str, Any]:
@@ -289,30 +316,48 @@ def parse_task_args(items: list[str] | None) -> dict[str, Any]:
 
 
 def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: dict[str, float], run_dir: Path | None,
-           resume: bool, steps: int | None) -> Path:  # fmt: skip
-    """Shared body of ``train`` and ``train-manager``: build and check the config, then train with a progress bar."""
+           resume: bool, steps: int | None, ctx: typer.Context | None = None) -> Path:  # fmt: skip
+    """Shared body of ``train`` and ``train-manager``: build and check the config, then train with a progress bar.
+
+    With ``--resume`` the run continues with its own settings: options left out take the run's values, and an option
+    given on the command line that differs from the run's is refused with one line naming it (only ``--steps`` may
+    change); ``train`` refuses a Manager run and ``train-manager`` a flat one."""
     import dataclasses
 
     from hrlp.algos.trpo import TRPOConfig
     from hrlp.algos.value import ValueFitConfig
-    from hrlp.checkpoint import CheckpointError
+    from hrlp.atomic import StorageError
+    from hrlp.checkpoint import CheckpointError, checkpoint_exists
     from hrlp.train import TrainConfig, env_factory, train_with_progress
 
     task = settings["task"]
     out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{settings['seed']}"
+    manager_command = settings.get("macro") is not None or (ctx is not None and ctx.info_name == "train-manager")
     try:
+        if steps is not None and steps <= 0:
+            raise ValueError(f"--steps must be a positive number of environment steps, got {steps}")
         if resume:
             from hrlp.checkpoint import load_checkpoint
 
-            if not (out / "checkpoint").exists():
+            if not checkpoint_exists(out / "checkpoint"):
                 raise ValueError(f"--resume: {out} has no checkpoint to continue from")
             try:
                 saved = TrainConfig.from_json(load_checkpoint(out / "checkpoint")[1]["config"])
             except CheckpointError as e:
                 raise ValueError(str(e)) from None
-            cfg = dataclasses.replace(saved, steps=steps or saved.steps)
+            except (KeyError, TypeError) as e:
+                raise ValueError(f"--resume: {out / 'checkpoint'}: its config is malformed ({e})") from None
+            if (saved.macro is not None) != manager_command:
+                kind, command = ("a Manager", "train-manager") if saved.macro is not None else ("a flat", "train")
+                raise ValueError(f"--resume: {out} holds {kind} run; continue it with 'hrlp {command} {saved.task} "
+                                 f"--run-dir {out} --resume'")  # fmt: skip
+            differences = _resume_differences(saved, ctx)
+            if differences:
+                raise ValueError(f"--resume: {out} was trained with other settings: {', '.join(differences)}; only --steps "
+                                 "may change (leave the other options out to continue with the run's own)")  # fmt: skip
+            cfg = dataclasses.replace(saved, steps=saved.steps if steps is None else steps)
         else:
-            if (out / "checkpoint").exists():
+            if checkpoint_exists(out / "checkpoint"):
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
             trpo = TRPOConfig(**trpo_settings)
             value = ValueFitConfig(max_iter=settings.pop("value_iters"), fraction=settings.pop("value_fraction"))
@@ -322,11 +367,171 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
         raise _fail(str(e)) from None
     kind = "train-manager" if cfg.macro is not None else "train"
     try:
-        train_with_progress(cfg, out, resume, err_console, f"{kind} {cfg.task}")
-    except (ValueError, CheckpointError) as e:
+        summary = train_with_progress(cfg, out, resume, err_console, f"{kind} {cfg.task}")
+    except (ValueError, CheckpointError, StorageError) as e:
         raise _fail(str(e)) from None
+    except OSError as e:  # a file system error not already named by hrlp's writers
+        raise _fail(_os_error_line(e, out)) from None
+    console.print(summary.line(), soft_wrap=True)
     console.print(f"run written to {out} (checkpoint: {out / 'checkpoint'}, logs: progress.csv, tb/)")
     return out
+
+
+def _os_error_line(error: OSError, where: Path) -> str:
+    """One line for an OSError: the path it names (else ``where``) and why."""
+    return f"{error.filename or where}: {error.strerror or error}"
+
+
+#: Options of ``train``/``train-manager`` that locate or drive the run rather than define it (not compared on --resume).
+_RUN_OPTIONS = frozenset({"ctx", "run_dir", "resume", "steps"})
+
+
+def _resume_differences(saved: Any, ctx: typer.Context | None) -> list[str]:
+    """``--OPTION VALUE (the run: VALUE)`` for every option given on the command line whose value differs from the
+    saved run's config ``saved``; options left out (their defaults) are the run's own and never differ."""
+    import dataclasses
+
+    if ctx is None:
+        return []
+
+    def given_here(name: str) -> bool:  # by the enum's name: Typer may carry its own copy of click's ParameterSource
+        source = ctx.get_parameter_source(name)
+        return source is not None and source.name not in ("DEFAULT", "DEFAULT_MAP")
+
+    given = [name for name in ctx.params if name not in _RUN_OPTIONS and given_here(name)]
+    out = []
+    for name in given:
+        flag = f"--{name.replace('_', '-')}" if name != "task" else "TASK"
+        value = ctx.params[name]
+        accessor = _RESUME_ACCESSORS.get(name)
+        if accessor is None and name in {f.name for f in dataclasses.fields(saved)}:  # an option named as its setting
+            accessor = _replace_top(name)
+        if accessor is None:
+            out.append(f"{flag} (cannot be checked against the run; leave it out)")
+            continue
+        get, put = accessor
+        try:
+            changed = put(saved, value, ctx.params) != saved
+        except (ValueError, TypeError):  # a value the run could not have had
+            changed = True
+        if changed:
+            shown = "TASK " + str(value) if name == "task" else f"{flag} {_show(value)}"
+            out.append(f"{shown} (the run: {_show(get(saved))})")
+    return out
+
+
+def _show(value: Any) -> str:
+    if isinstance(value, list | tuple):
+        return ",".join(map(str, value)) if value else "(none)"
+    if value is None:
+        return "(default)"
+    return str(value)
+
+
+def _replace_trpo(name: str) -> tuple[Any, Any]:
+    import dataclasses
+
+    return (lambda c: getattr(c.trpo, name),
+            lambda c, v, p: dataclasses.replace(c, trpo=dataclasses.replace(c.trpo, **{name: v})))  # fmt: skip
+
+
+def _replace_top(name: str) -> tuple[Any, Any]:
+    import dataclasses
+
+    return lambda c: getattr(c, name), lambda c, v, p: dataclasses.replace(c, **{name: v})
+
+
+def _replace_macro(field: str, convert: Any = lambda v: v) -> tuple[Any, Any]:
+    import dataclasses
+
+    return (lambda c: getattr(c.macro, field),
+            lambda c, v, p: dataclasses.replace(c, macro=dataclasses.replace(c.macro, **{field: convert(v)})))  # fmt: skip
+
+
+def _micro_flag() -> tuple[Any, Any]:
+    import dataclasses
+
+    def put(c: Any, v: bool, p: dict[str, Any]) -> Any:
+        from hrlp.skills.macro_env import MicroAction
+
+        if not v:
+            micro = None
+        else:
+            micro = c.macro.micro or MicroAction(p["micro_duration"], p["micro_penalty"], p["micro_max_torque"])
+        return dataclasses.replace(c, macro=dataclasses.replace(c.macro, micro=micro))
+
+    return (lambda c: "on" if c.macro.micro is not None else "off"), put
+
+
+def _handover_flag() -> tuple[Any, Any]:
+    import dataclasses
+
+    def put(c: Any, v: bool, p: dict[str, Any]) -> Any:
+        from hrlp.skills.macro_env import Handover
+
+        handover = (c.macro.handover or Handover()) if v else None
+        return dataclasses.replace(c, macro=dataclasses.replace(c.macro, handover=handover))
+
+    return (lambda c: "on" if c.macro.handover is not None else "off"), put
+
+
+def _micro_field(field: str) -> tuple[Any, Any]:
+    import dataclasses
+
+    def put(c: Any, v: Any, p: dict[str, Any]) -> Any:
+        if c.macro.micro is None:  # the run has no micro-action: as in a fresh run without --micro, the option is unused
+            return c
+        micro = dataclasses.replace(c.macro.micro, **{field: v})
+        return dataclasses.replace(c, macro=dataclasses.replace(c.macro, micro=micro))
+
+    return (lambda c: "off" if c.macro.micro is None else getattr(c.macro.micro, field)), put
+
+
+def _task_accessor() -> tuple[Any, Any]:
+    import dataclasses
+
+    def name(task: str) -> str:
+        return task.removeprefix("hrlp/").removesuffix("-v0")
+
+    def put(c: Any, v: str, p: dict[str, Any]) -> Any:
+        return c if name(v) == name(c.task) else dataclasses.replace(c, task=v)
+
+    return lambda c: c.task, put
+
+
+def _value_accessor(field: str) -> tuple[Any, Any]:
+    import dataclasses
+
+    return (lambda c: getattr(c.value, field),
+            lambda c, v, p: dataclasses.replace(c, value=dataclasses.replace(c.value, **{field: v})))  # fmt: skip
+
+
+def _task_args_accessor() -> tuple[Any, Any]:
+    import dataclasses
+
+    def show(c: Any) -> str:
+        return ",".join(f"{k}={v}" for k, v in c.task_kwargs.items()) or "(none)"
+
+    return show, lambda c, v, p: dataclasses.replace(c, task_kwargs=parse_task_args(v))
+
+
+#: How each defining option of ``train``/``train-manager`` reads (for the message) and sets (to compare) a saved config.
+_RESUME_ACCESSORS: dict[str, tuple[Any, Any]] = {
+    "task": _task_accessor(),
+    **{name: _replace_top(name) for name in ("seed", "batch_steps", "num_envs", "episode_steps", "init_log_std", "workers")},
+    **{name: _replace_trpo(name) for name in ("max_kl", "gamma", "fisher_fraction")},
+    "value_iters": _value_accessor("max_iter"),
+    "value_fraction": _value_accessor("fraction"),
+    "task_arg": _task_args_accessor(),
+    "skills": _replace_macro("skills", lambda v: tuple(s.strip() for s in v.split(",") if s.strip())),
+    "k": _replace_macro("k"),
+    "library": _replace_macro("library", lambda v: None if v is None else str(v)),
+    "micro": _micro_flag(),
+    "handover": _handover_flag(),
+    "micro_duration": _micro_field("duration"),
+    "micro_penalty": _micro_field("penalty"),
+    "micro_max_torque": _micro_field("max_torque"),
+}
 
 
 @app.command("eval")
@@ -342,14 +547,21 @@ def eval_(
 
     try:
         ev = evaluate_run(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic)
-    except (ValueError, CheckpointError, FileNotFoundError) as e:
+    except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
+    except OSError as e:
+        raise _fail(_os_error_line(e, run_dir)) from None
     console.print(f"episodes: {ev.episodes}")
     console.print(f"return (mean, 95% CI): {ev.ret}")
     if ev.success is not None:
         console.print(f"success rate (95% Wilson CI): {ev.success}")
     if ev.target_dist_sum is not None:
         console.print(f"TargetDistSum (mean, 95% CI): {ev.target_dist_sum}")
+    if ev.move is not None:
+        m = ev.move
+        console.print(f"TargetDistSum of the capsule left untouched: {m.untouched_target_dist_sum}; ours minus it: "
+                      f"{m.relative_target_dist_sum}")  # fmt: skip
+        console.print(f"min d(C, T) (m): {m.min_target_dist}; capsule lifted > 3 cm (Wilson CI): {m.lift_rate}")
     if ev.macro_usage is not None:
         console.print("decisions per macro-action: " + ", ".join(f"{k} {v:.0%}" for k, v in ev.macro_usage.items()))
 
@@ -414,6 +626,81 @@ def skills_add(
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
     console.print(f"skill {name!r} written to {path}")
+
+
+@skills_app.command("build")
+def skills_build(
+    library: Annotated[Path, typer.Option(help="Library the skills are added to.")],
+    out: Annotated[Path, typer.Option(help="Root of the training runs (as 'hrlp reproduce --out').")] = Path("runs/reproduce"),
+    only: Annotated[str, typer.Option(help="Comma-separated skills to build (default: all of them).")] = "",
+    budget: Annotated[int | None, typer.Option(help="Environment steps per skill (default: each recipe's own).")] = None,
+    workers: Annotated[int, typer.Option(help="Runs at once.")] = 2,
+    overwrite: Annotated[bool, typer.Option(help="Replace skills of the same names in the library.")] = False,
+) -> None:
+    """Train the shipped skills from their recipes (the 'shipped-skills' preset) and add them to LIBRARY."""
+    from dataclasses import replace
+
+    from hrlp.checkpoint import CheckpointError
+    from hrlp.experiments.presets import PRESETS
+    from hrlp.experiments.runner import plan
+    from hrlp.experiments.runner import reproduce as run_grid
+    from hrlp.skills import SkillLibrary
+
+    preset = PRESETS["shipped-skills"]
+    names = [s.strip() for s in only.split(",") if s.strip()]
+    known = [r.name for r in preset.runs]
+    try:
+        if unknown := sorted(set(names) - set(known)):
+            raise ValueError(f"--only: no recipe for {', '.join(unknown)} (recipes: {', '.join(known)})")
+        preset = replace(preset, runs=tuple(r for r in preset.runs if not names or r.name in names))
+        lib = SkillLibrary(library)
+        if not overwrite and (taken := [r.skill[0] for r in preset.runs if r.skill and r.skill[0] in lib.names()]):
+            raise ValueError(f"{library} already has {', '.join(taken)}; pass --overwrite to replace them")
+        run_grid(preset, out, None, budget, "process", workers, None, reuse=False)
+        if budget is not None:
+            preset = preset.with_budget(budget)
+        for job, run in zip(plan(preset, out), preset.runs, strict=True):
+            assert run.skill is not None
+            lib.add(job.run_dir, run.skill[0], k=run.skill[1], overwrite=overwrite)
+            console.print(f"skill {run.skill[0]!r} (k = {run.skill[1]}) from {job.run_dir} added to {library}")
+    except (ValueError, CheckpointError) as e:
+        raise _fail(str(e)) from None
+
+
+@app.command()
+def dagger(
+    manager_run: Annotated[Path, typer.Argument(help="Run directory of a trained Manager.")],
+    skill: Annotated[str, typer.Option(help="The Manager's skill to retrain from its hand-over states.")] = "gripper",
+    name: Annotated[str | None, typer.Option(help="Name of the retrained skill (default: SKILL-dagger).")] = None,
+    out: Annotated[Path | None, typer.Option(help="Directory of the round (default: MANAGER_RUN-dagger).")] = None,
+    library: _LIBRARY = None,
+    states: Annotated[int, typer.Option(help="Hand-over states to collect.")] = 2_000,
+    skill_steps: Annotated[int, typer.Option(help="Environment steps of the skill's retraining.")] = 2_000_000,
+    starts_fraction: Annotated[float, typer.Option(help="Share of retraining episodes from hand-over states.")] = 0.5,
+    manager_steps: Annotated[int | None, typer.Option(help="Steps of the new Manager (default: the old one's).")] = None,
+    workers: _WORKERS = 2,
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes per success rate.")] = 100,
+    seed: _SEED = 0,
+) -> None:
+    """One DAgger round (Appendix C): collect the states where MANAGER_RUN calls SKILL, retrain the skill from them
+    (warm-started), freeze it under a new name with its lineage, retrain the Manager with it, compare old and new."""
+    from hrlp.checkpoint import CheckpointError
+    from hrlp.skills.dagger import DaggerConfig, run_round
+
+    try:
+        cfg = DaggerConfig(str(manager_run), skill, name or f"{skill}-dagger", None if library is None else str(library),
+                           states, skill_steps, starts_fraction, manager_steps, workers, episodes, seed)  # fmt: skip
+        res = run_round(cfg, out or manager_run.with_name(manager_run.name + "-dagger"), err_console)
+    except (ValueError, CheckpointError) as e:
+        raise _fail(str(e)) from None
+
+    def cell(d: dict[str, Any]) -> str:
+        return f"{d['mean']:.2f} [{d['low']:.2f}, {d['high']:.2f}]"
+
+    for what, key in (("skill from hand-over states", "skill_from_handover"), ("skill from its own starts",
+                      "skill_from_own_starts"), ("Manager", "manager")):  # fmt: skip
+        console.print(f"{what}: {cell(res[key]['old'])} -> {cell(res[key]['new'])}")
+    console.print(f"round written to {res['round_dir']}/round.json; new skill {res['new_skill']}")
 
 
 def main() -> None:

@@ -24,6 +24,24 @@ from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
 
 
+class NonFiniteError(ValueError):
+    """NaN or inf where data enters training (an observation, a reward, an action, a value target), named by the
+    environment index, the step and the field, raised before the data reaches the normaliser, the networks or a
+    checkpoint."""
+
+
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+"""Batches are float32 tensors: a reward beyond this is finite here but infinite in the batch."""
+
+
+def first_non_finite(values: np.ndarray | torch.Tensor, bound: float = math.inf) -> tuple[int, ...] | None:
+    """The index of the first NaN or inf in ``values`` (C order) -- or, with ``bound``, of the first value whose
+    magnitude exceeds it -- or None if there is none."""
+    a = values.detach().cpu().numpy() if isinstance(values, torch.Tensor) else np.asarray(values)
+    bad = np.argwhere(~(np.abs(a) <= bound)) if bound < math.inf else np.argwhere(~np.isfinite(a))
+    return None if bad.size == 0 else tuple(int(i) for i in bad[0])
+
+
 @dataclass(frozen=True)
 class Batch:
     """``T`` steps of ``N`` environments, time-major. Observations are normalised as the policy saw them."""
@@ -80,6 +98,11 @@ class Sampler:
             baseline see every observation of the batch normalised alike; they are updated with the batch's raw
             observations at its end (unless frozen).
         seed: environment ``i`` is reset first with ``seed + i``; actions use a torch generator seeded with ``seed``.
+        first_index: the index of the first environment in error messages (a sampling worker's share starts there).
+
+    Every observation (at reset and after each step), reward and action is checked for NaN and inf as it enters;
+    the first non-finite one raises :class:`NonFiniteError` naming the environment, the step and the field, before
+    the batch reaches the normaliser.
     """
 
     def __init__(
@@ -88,6 +111,7 @@ class Sampler:
         policy: Policy,
         normalizer: RunningNormalizer,
         seed: int = 0,
+        first_index: int = 0,
     ) -> None:
         if not env_fns:
             raise ValueError("Sampler needs at least one environment")
@@ -105,6 +129,7 @@ class Sampler:
         self.timing = Timing()
         self.last_raw_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations of the last batch
         self._requested: int | None = None
+        self.first_index = first_index
 
     @property
     def num_envs(self) -> int:
@@ -140,11 +165,16 @@ class Sampler:
         env_steps = 0
         physics0 = physics_seconds(self.envs)
         act = self.policy.numpy_actor()  # the weights stay fixed during a batch
+        if not np.isfinite(self._obs).all():  # a reset's (or a restored state's) observation
+            self._non_finite(-1, {"observation": self._obs}, None)
         for t in range(steps_per_env):
             t0 = time.perf_counter()
             raw_buf[t] = self._obs
             obs_buf[t] = self.normalizer.normalize(self._obs)
             actions = act(obs_buf[t].astype(np.float32), self.generator)
+            if not np.isfinite(actions).all():
+                self._non_finite(t, {"action": actions.reshape(n, -1)}, self._len + 1)
+            episode_steps = self._len + 1  # per environment, the step of its episode taken now (a Manager's: its first)
             if actions_buf is None:
                 actions_buf = np.empty((steps_per_env, *actions.shape))
             actions_buf[t] = actions
@@ -153,6 +183,7 @@ class Sampler:
                 res = self._step_batch(self.envs, actions)
                 assert discount is not None
                 rewards[t], discount[t], next_raw[:] = res.rewards, res.discount, res.obs
+                episode_steps = self._len + res.tau  # a macro-action's last low-level step
                 self._ret += res.task_reward
                 self._len += res.tau
                 env_steps += int(res.tau.sum())
@@ -176,6 +207,12 @@ class Sampler:
                     self._obs[i] = obs
                 env_steps += n
             t2 = time.perf_counter()
+            # A few microseconds per step for all environments: every number that enters training is finite.
+            # (A reward beyond float32's range is finite here but infinite in the float32 batch: it counts as non-finite.)
+            ok_rewards = np.abs(rewards[t]).max() <= FLOAT32_MAX  # False for NaN too
+            if not (ok_rewards and np.isfinite(next_raw).all() and np.isfinite(self._obs).all()):
+                self._non_finite(t, {"reward": rewards[t], "observation": next_raw, "reset observation": self._obs},
+                                 episode_steps)  # fmt: skip
             next_buf[t] = self.normalizer.normalize(next_raw)
             self.timing.inference += t1 - t0
             self.timing.env += t2 - t1
@@ -222,6 +259,30 @@ class Sampler:
         self._obs[:] = state["obs"]
         self._ret[:] = state["ret"]
         self._len[:] = state["len"]
+
+    def _non_finite(self, t: int, fields: dict[str, np.ndarray], steps: np.ndarray | None) -> None:
+        """Raise :class:`NonFiniteError` for the first non-finite value of ``fields`` (each ``[N]`` or ``[N, D]``).
+
+        ``t``: the decision of the batch (-1: before the first); ``steps``: per environment, the step of its episode the
+        values belong to (None: they come from a reset). A field named ``reset observation`` always comes from a reset.
+        """
+        for name, values in fields.items():
+            where = first_non_finite(values, FLOAT32_MAX if name == "reward" else math.inf)
+            if where is None:
+                continue
+            i = where[0]
+            field = name if len(where) == 1 else f"{name}[{where[1]}]"
+            if steps is None or name == "reset observation":
+                when = "at the reset that starts an episode"
+            else:
+                when = f"at step {int(steps[i])} of its episode"
+            if t >= 0:
+                when += f" (decision {t + 1} of this batch)"
+            value = float(values[where])
+            shown = f"{value}, beyond float32's range" if math.isfinite(value) else str(value)
+            raise NonFiniteError(f"non-finite {field} ({shown}) from environment {self.first_index + i} {when}; "
+                                 "stopped before it entered the normaliser, the networks or a checkpoint")  # fmt: skip
+        raise AssertionError("_non_finite called with finite values")  # pragma: no cover
 
     def _finish(self, i: int, info: dict) -> Episode:
         success = info.get("success")
@@ -272,7 +333,7 @@ class ParallelSampler:
         for w in range(workers):
             parent, child = ctx.Pipe()
             chunk = list(env_fns[bounds[w] : bounds[w + 1]])
-            args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w)
+            args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w, int(bounds[w]))
             proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
             proc.start()
             child.close()
@@ -354,17 +415,20 @@ def _receive(conn: Any) -> Any:
         kind, payload = conn.recv()
     except EOFError:
         raise RuntimeError("a sampler worker process died") from None
+    if kind == "non-finite":
+        raise NonFiniteError(payload)
     if kind == "error":
         raise RuntimeError(f"sampler worker failed: {payload}")
     return payload
 
 
-def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict, env_seed: int, noise_seed: int) -> None:
+def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict, env_seed: int, noise_seed: int,
+                    first_index: int = 0) -> None:  # fmt: skip
     """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests."""
     torch.set_num_threads(1)
     try:
         normalizer = RunningNormalizer.from_config({**norm_config, "frozen": True})
-        sampler = Sampler(env_fns, policy, normalizer, seed=env_seed)
+        sampler = Sampler(env_fns, policy, normalizer, seed=env_seed, first_index=first_index)
         sampler.generator.manual_seed(noise_seed)
         conn.send(("ok", None))
     except Exception as e:  # reported to the parent, which raises it
@@ -399,6 +463,8 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
             else:
                 raise ValueError(f"unknown command {cmd!r}")
             conn.send(("ok", reply))
+        except NonFiniteError as e:  # the parent raises it as it is (it names the environment by its global index)
+            conn.send(("non-finite", str(e)))
         except Exception as e:  # reported to the parent, which raises it
             conn.send(("error", f"{type(e).__name__}: {e}"))
 

@@ -15,6 +15,7 @@ import json
 import math
 import os
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,11 +28,19 @@ import torch
 from hrlp.algos.kernels import gae
 from hrlp.algos.trpo import TRPOConfig, trpo_update
 from hrlp.algos.value import ValueFitConfig, fit_value
-from hrlp.atomic import atomic_path
-from hrlp.checkpoint import load_checkpoint, load_module, module_tensors, pack_generators, save_checkpoint, unpack_generators
+from hrlp.atomic import atomic_path, directory_lock, writing
+from hrlp.checkpoint import (
+    checkpoint_exists,
+    load_checkpoint,
+    load_module,
+    module_tensors,
+    pack_generators,
+    save_checkpoint,
+    unpack_generators,
+)
 from hrlp.policies.mlp import GaussianPolicy, Policy, ValueNet, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.rollout import ParallelSampler, Sampler, action_decoder, mean_or_nan
+from hrlp.rollout import NonFiniteError, ParallelSampler, Sampler, action_decoder, first_non_finite, mean_or_nan
 from hrlp.skills.macro_env import MacroEnv, MacroSpec
 
 
@@ -65,6 +74,9 @@ class TrainConfig:
     """For a Manager: its skills, their duration k and the micro-action; None for a flat policy."""
     task_kwargs: dict[str, Any] = field(default_factory=dict)
     """Arguments of the task, e.g. ``{"c1": -10.0}`` (Gripper reward constants) or ``{"curriculum_alpha": 1e-4}``."""
+    init_from: str | None = None
+    """For a flat run: a skill (a name in the libraries a Manager searches, or a skill directory) whose policy and
+    observation statistics the run starts from instead of a fresh network (DAgger retraining, ``hrlp dagger``)."""
 
     def __post_init__(self) -> None:
         for name in ("steps", "batch_steps", "num_envs", "workers"):
@@ -150,10 +162,33 @@ class _MacroFactory:
         if self._skills is None:
             self._skills = self.macro.load_skills()
             check_skill_hashes(self.hashes, {s.name: s.content_hash for s in self._skills}, Path("skill library"))
-        return MacroEnv(make(self.name, **self.kwargs), self._skills, self.macro.k, self.macro.micro, self.gamma)
+        return MacroEnv(
+            make(self.name, **self.kwargs), self._skills, self.macro.k, self.macro.micro, self.gamma, self.macro.handover
+        )
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_skills": None}
+
+
+def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) -> None:
+    """Copy the skill ``cfg.init_from`` (its policy's weights and its observation statistics, thawed) into a fresh
+    flat run's ``policy`` and ``normalizer``. Raises ValueError naming the skill when it does not fit the run."""
+    from hrlp.skills.library import SkillLibrary, load_skill
+
+    assert cfg.init_from is not None
+    if cfg.macro is not None:
+        raise ValueError("init_from starts a flat run from a skill; a Manager cannot start from one")
+    where = Path(cfg.init_from)
+    skill = SkillLibrary(where.parent).load(where.name) if (where / "meta.json").is_file() else load_skill(cfg.init_from)
+    task = cfg.task.removeprefix("hrlp/").removesuffix("-v0")
+    if not isinstance(policy, GaussianPolicy) or skill.obs_dim != normalizer.mean.shape[0] or task != skill.task:
+        raise ValueError(f"init_from: skill {skill.name} ({skill.task}, {skill.obs_dim} observations) does not fit a "
+                         f"{task} run with {normalizer.mean.shape[0]} observations")  # fmt: skip
+    try:
+        policy.load_state_dict(skill.policy.state_dict())
+    except RuntimeError:
+        raise ValueError(f"init_from: skill {skill.name}'s network does not have hidden layers {cfg.hidden}") from None
+    normalizer.load_state_dict(skill.normalizer.state_dict())
 
 
 class Trainer:
@@ -176,6 +211,8 @@ class Trainer:
         probe.close()
         self.value_net = ValueNet(obs_dim, cfg.hidden)
         self.normalizer = RunningNormalizer(obs_dim)
+        if cfg.init_from is not None:
+            warm_start(self.policy, self.normalizer, cfg)
         envs = [factory] * cfg.num_envs
         self.sampler: Sampler | ParallelSampler
         self._update_threads: int | None = None
@@ -211,7 +248,10 @@ class Trainer:
             vstats = fit_value(self.value_net, *self.pending_value_fit, cfg.value)
             self.pending_value_fit = None
         t_fit = time.perf_counter() - t0
-        batch, episodes = self.sampler.receive()
+        try:
+            batch, episodes = self.sampler.receive()
+        except NonFiniteError as e:
+            raise NonFiniteError(f"{cfg.task}, iteration {self.iteration + 1}: {e}") from None
         t1 = time.perf_counter()
         if self._update_threads is not None:
             torch.set_num_threads(self._update_threads)
@@ -222,6 +262,7 @@ class Trainer:
             next_values = self.value_net(batch.next_obs.reshape(T * N, D)).reshape(T, N)
         adv = gae(batch.rewards, values, next_values, batch.terminated, batch.truncated, cfg.trpo.gamma, cfg.trpo.gae_lambda,
                   discount=batch.discount)  # fmt: skip
+        self._check_value_targets(values, next_values, adv.advantages, adv.returns)
         actions = batch.actions.reshape(T * N, *batch.actions.shape[2:])
         with torch.no_grad():
             old_dist = self.policy(obs)
@@ -261,6 +302,22 @@ class Trainer:
             out["manager/decisions"] = batch.steps
             out["manager/mean_tau"] = batch.env_steps / batch.steps
         return out
+
+    def _check_value_targets(self, values: torch.Tensor, next_values: torch.Tensor, advantages: torch.Tensor,
+                             returns: torch.Tensor) -> None:  # fmt: skip
+        """Raise :class:`NonFiniteError` naming the environment, the step and the field if the baseline's predictions,
+        the advantages or the value targets (GAE returns) of the batch ``[T, N]`` hold a NaN or inf (the rewards and
+        observations were checked by the sampler; this catches a diverged baseline or an overflow)."""
+        for name, values_ in (("baseline value", values), ("baseline value of the next observation", next_values),
+                              ("advantage", advantages), ("value target (GAE return)", returns)):  # fmt: skip
+            where = first_non_finite(values_)
+            if where is not None:
+                t, i = where
+                raise NonFiniteError(
+                    f"{self.cfg.task}, iteration {self.iteration + 1}: non-finite {name} ({float(values_[t, i])}) for "
+                    f"environment {i} at decision {t + 1} of the batch; stopped before the policy step, the baseline fit "
+                    "and the checkpoint"
+                )
 
     # --- persistence --------------------------------------------------------------------------
     def state(self) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
@@ -313,8 +370,16 @@ class Trainer:
         return {} if gen is None else {"actions": gen}
 
     def save(self, directory: Path) -> Path:
-        """Write the policy, baseline, normaliser and progress atomically to ``directory``."""
+        """Write the policy, baseline, normaliser and progress atomically to ``directory``.
+
+        Refuses (:class:`~hrlp.rollout.NonFiniteError`, nothing written) a state holding a NaN or inf, so a checkpoint
+        is never poisoned: the previous one stays."""
         tensors, meta = self.state()
+        for name, tensor in tensors.items():
+            if tensor.is_floating_point() and (where := first_non_finite(tensor)) is not None:
+                raise NonFiniteError(f"{self.cfg.task}, iteration {self.iteration}: {name}{list(where)} is "
+                                     f"{float(tensor[where])}; refusing to save it over the checkpoint in "
+                                     f"{directory}")  # fmt: skip
         return save_checkpoint(directory, tensors, meta)
 
 
@@ -394,7 +459,8 @@ class RunLogger:
         self.run_dir = run_dir
         self._csv_path = run_dir / "progress.csv"
         self._fields: list[str] | None = None
-        self._tb = SummaryWriter(str(run_dir / "tb"))
+        with writing(run_dir / "tb"):
+            self._tb = SummaryWriter(str(run_dir / "tb"))
 
     def log(self, stats: dict[str, float]) -> None:
         """Append one row. The header comes from the first row, or from the file a resumed run already wrote; a
@@ -409,65 +475,263 @@ class RunLogger:
             else:
                 self._fields = list(stats)
                 _write_csv(self._csv_path, [self._fields])
-        with self._csv_path.open("a", newline="") as f:
+        with writing(self._csv_path), self._csv_path.open("a", newline="") as f:
             csv.writer(f).writerow([stats.get(k, math.nan) for k in self._fields])
+            f.flush()  # a full disk shows here, inside writing(), not at an implicit close
         step = int(stats["env_steps"])
-        for k, v in stats.items():
-            if isinstance(v, int | float) and math.isfinite(v):
-                self._tb.add_scalar(k, v, step)
-        self._tb.flush()
+        with writing(self.run_dir / "tb"):
+            for k, v in stats.items():
+                if isinstance(v, int | float) and math.isfinite(v):
+                    self._tb.add_scalar(k, v, step)
+            self._tb.flush()
 
     def close(self) -> None:
         """Flush and close TensorBoard."""
         self._tb.close()
 
 
-def train(cfg: TrainConfig, run_dir: Path, resume: bool = False) -> Iterator[dict[str, float]]:
+def config_differences(saved: TrainConfig, given: TrainConfig, ignore: tuple[str, ...] = ("steps",)) -> list[str]:
+    """The settings in which ``given`` differs from ``saved``, as ``"trpo.max_kl: 0.02 in the run, 0.01 given"``
+    (dotted names of :meth:`TrainConfig.to_json`; the top-level names in ``ignore`` are left out). The task is compared
+    by name (``Gripper``, ``hrlp/Gripper-v0`` and ``Gripper-v0`` are one task)."""
+
+    def flat(d: Any, prefix: str = "") -> dict[str, Any]:
+        if isinstance(d, dict) and d:
+            return {k: v for key, value in d.items() for k, v in flat(value, f"{prefix}{key}.").items()}
+        return {prefix.removesuffix("."): d}
+
+    def task_name(task: str) -> str:
+        return task.removeprefix("hrlp/").removesuffix("-v0")
+
+    a = json.loads(json.dumps(saved.to_json()))  # tuples -> lists on both sides
+    b = json.loads(json.dumps(given.to_json()))
+    a["task"], b["task"] = task_name(a["task"]), task_name(b["task"])
+    if (a["macro"] is None) != (b["macro"] is None):
+        kind = {True: "a flat policy", False: "a Manager"}
+        return [f"kind: {kind[a['macro'] is None]} in the run, {kind[b['macro'] is None]} given"]
+    fa, fb = flat(a), flat(b)
+    out = []
+    for name in sorted(set(fa) | set(fb)):
+        if name.split(".")[0] in ignore:
+            continue
+        va, vb = fa.get(name, "(unset)"), fb.get(name, "(unset)")
+        if va != vb:
+            out.append(f"{name}: {json.dumps(va)} in the run, {json.dumps(vb)} given")
+    return out
+
+
+@dataclass(frozen=True)
+class StepPlan:
+    """What a run will actually train: its step budget rounded up to whole iterations."""
+
+    requested: int
+    """``cfg.steps``: the low-level environment steps asked for."""
+    done: int
+    """Low-level steps already trained (a resumed run's)."""
+    decisions_per_iteration: int
+    """Decisions per iteration: ``ceil(batch_steps / num_envs) * num_envs``."""
+    manager: bool
+    """A Manager's decisions last one or more low-level steps each, so its total is known only as it runs."""
+
+    @property
+    def iterations(self) -> int | None:
+        """Iterations still to run (None for a Manager: it depends on the macro-actions' lengths)."""
+        if self.manager:
+            return None
+        return max(0, math.ceil((self.requested - self.done) / self.decisions_per_iteration))
+
+    @property
+    def total(self) -> int | None:
+        """Low-level steps at the end of the run, exactly (None for a Manager)."""
+        its = self.iterations
+        return None if its is None else self.done + its * self.decisions_per_iteration
+
+    def note(self) -> str | None:
+        """A one-line explanation when the run will not train exactly ``requested`` steps; None when it will."""
+        per = self.decisions_per_iteration
+        if self.done >= self.requested:
+            return (f"the run already has {self.done:,} of the {self.requested:,} steps asked for: nothing to train "
+                    "(raise --steps to continue it)")  # fmt: skip
+        if self.manager:  # its decisions last tau >= 1 low-level steps each: the total is known only at the end
+            return (f"--steps {self.requested:,}: a Manager iteration is {per:,} decisions of one or more low-level steps "
+                    f"each, so the run stops after the first iteration that reaches {self.requested:,} steps (up to one "
+                    "iteration more)")  # fmt: skip
+        total = self.total
+        assert total is not None
+        if total == self.requested:
+            return None
+        its = self.iterations
+        return (f"--steps {self.requested:,} runs {total - self.done:,} steps: {its} iteration{'s' if its != 1 else ''} "
+                f"of {per:,} ({self.done + (its or 0) * per:,} in total); training runs whole iterations of "
+                "--batch-steps rounded up to a multiple of --num-envs")  # fmt: skip
+
+
+def plan_steps(cfg: TrainConfig, done: int = 0) -> StepPlan:
+    """The :class:`StepPlan` of ``cfg`` from ``done`` steps already trained."""
+    return StepPlan(cfg.steps, done, cfg.steps_per_env * cfg.num_envs, cfg.macro is not None)
+
+
+#: Consecutive rejected TRPO steps after which :func:`train` warns that the policy is not learning.
+REJECTED_STEPS_WARNING = 5
+
+
+class TrainingWarning(UserWarning):
+    """Training runs but does not learn (e.g. every TRPO step rejected)."""
+
+
+def rejected_steps_message(streak: int, cfg: TrainConfig, iteration: int) -> str:
+    """The warning for ``streak`` consecutive rejected TRPO steps ending at ``iteration``."""
+    return (f"{cfg.task}: the last {streak} TRPO steps (iterations {iteration - streak + 1}-{iteration}) were all rejected: "
+            f"no step within max KL {cfg.trpo.max_kl:g} improved the surrogate, so the policy has not changed; check "
+            "--init-log-std, --max-kl and the rewards")  # fmt: skip
+
+
+def train(
+    cfg: TrainConfig,
+    run_dir: Path,
+    resume: bool = False,
+    *,
+    on_start: Callable[[StepPlan], None] | None = None,
+    on_warning: Callable[[str], None] | None = None,
+    warn_after_rejected: int = REJECTED_STEPS_WARNING,
+) -> Iterator[dict[str, float]]:
     """Train, yielding each iteration's statistics; writes logs, a checkpoint per iteration, and ``config.json``.
 
     With ``resume``, continue from ``run_dir/checkpoint`` (its config must equal ``cfg`` except ``steps``, which
-    may grow); log rows written after that checkpoint are dropped so the log matches the restored state.
+    may grow; a difference raises ValueError naming every differing setting); log rows written after that checkpoint
+    are dropped so the log matches the restored state. Without it, a directory that holds a checkpoint -- or only the
+    ``.old`` copy a kill between a save's renames leaves (:func:`hrlp.checkpoint.checkpoint_exists`) -- is refused.
+
+    The run holds an OS lock on ``run_dir`` (:func:`hrlp.atomic.directory_lock`) from before it reads the checkpoint
+    until it ends: a second trainer, or a ``--resume`` beside a running one, fails at once with a one-line error.
+    Non-finite data stops the run with :class:`~hrlp.rollout.NonFiniteError` before anything of that iteration is
+    saved; a full disk or read-only directory raises :class:`hrlp.atomic.StorageError` naming the path.
+
+    ``on_start`` receives the :class:`StepPlan` (what will actually run) before the first iteration. After
+    ``warn_after_rejected`` consecutive rejected TRPO steps ``on_warning`` gets a one-line warning (default:
+    :func:`warnings.warn` with :class:`TrainingWarning`), once per run of rejections.
     """
-    if resume:
-        trainer = Trainer.resume(run_dir / "checkpoint")
-        saved = trainer.cfg
-        if dataclasses.replace(saved, steps=cfg.steps) != cfg:
-            raise ValueError(f"{run_dir}: --resume needs the run's own settings (only --steps may change)")
-        trainer.cfg = cfg
-        _truncate_log(run_dir / "progress.csv", trainer.iteration)
-    else:
-        if (run_dir / "checkpoint").exists():
-            raise ValueError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
-        run_dir.mkdir(parents=True, exist_ok=True)
-        trainer = Trainer(cfg)
-    (run_dir / "config.json").write_text(json.dumps(cfg.to_json(), indent=2))
-    logger = RunLogger(run_dir)
-    try:
-        while trainer.env_steps < cfg.steps:
-            stats = trainer.iterate()
-            trainer.save(run_dir / "checkpoint")
-            logger.log(stats)
-            yield stats
-    finally:
-        logger.close()
-        trainer.sampler.close()
+    run_dir = Path(run_dir)
+    warn = on_warning or (lambda message: warnings.warn(message, TrainingWarning, stacklevel=3))
+    if resume and not checkpoint_exists(run_dir / "checkpoint"):  # before the lock, which would create run_dir
+        raise ValueError(f"--resume: {run_dir} has no checkpoint to continue from")
+    with directory_lock(run_dir):
+        checkpoint = run_dir / "checkpoint"
+        if resume:
+            if not checkpoint_exists(checkpoint):
+                raise ValueError(f"--resume: {run_dir} has no checkpoint to continue from")
+            trainer = Trainer.resume(checkpoint)
+        else:
+            if checkpoint_exists(checkpoint):
+                raise ValueError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
+            trainer = Trainer(cfg)
+        logger: RunLogger | None = None
+        try:  # from here on, whatever fails, the sampler (and its worker processes) is closed
+            if resume:
+                differences = config_differences(trainer.cfg, cfg)
+                if differences:
+                    raise ValueError(f"{run_dir}: --resume needs the run's own settings (only --steps may change); "
+                                     f"{'; '.join(differences)}")  # fmt: skip
+                trainer.cfg = cfg
+                _truncate_log(run_dir / "progress.csv", trainer.iteration)
+            config_path = run_dir / "config.json"
+            with writing(config_path):
+                config_path.write_text(json.dumps(cfg.to_json(), indent=2))
+            if on_start is not None:
+                on_start(plan_steps(cfg, trainer.env_steps))
+            logger = RunLogger(run_dir)
+            streak = 0
+            while trainer.env_steps < cfg.steps:
+                stats = trainer.iterate()
+                trainer.save(checkpoint)
+                logger.log(stats)
+                streak = 0 if stats.get("trpo/accepted", 1.0) else streak + 1
+                if warn_after_rejected > 0 and streak == warn_after_rejected:
+                    warn(rejected_steps_message(streak, cfg, trainer.iteration))
+                yield stats
+        finally:
+            if logger is not None:
+                logger.close()
+            trainer.sampler.close()
+
+
+@dataclass
+class RunSummary:
+    """What a session of :func:`train_with_progress` did."""
+
+    iterations: int = 0
+    """Iterations trained in this session."""
+    env_steps: int = 0
+    """The run's low-level environment steps at the end (a resumed run's earlier ones included)."""
+    env_steps_this_session: int = 0
+    """Low-level steps trained in this session."""
+    rejected: int = 0
+    """TRPO steps of this session that were rejected (the policy unchanged)."""
+    longest_rejected_streak: int = 0
+    """The longest run of consecutive rejected TRPO steps."""
+    warnings: list[str] = field(default_factory=list)
+    """Warnings raised while training (e.g. :func:`rejected_steps_message`)."""
+
+    def line(self) -> str:
+        """One line: iterations, steps, and the rejected TRPO steps if any."""
+        out = (
+            f"trained {self.iterations} iteration{'s' if self.iterations != 1 else ''}, {self.env_steps_this_session:,} "
+            f"environment steps ({self.env_steps:,} in the run)"
+        )
+        if self.iterations and self.rejected == self.iterations:
+            out += f"; warning: all {self.rejected} TRPO steps were rejected, the policy did not change"
+        elif self.rejected:
+            out += f"; {self.rejected} of {self.iterations} TRPO steps rejected (longest run {self.longest_rejected_streak})"
+        return out
 
 
 def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, console: Any = None,
-                        description: str | None = None) -> None:  # fmt: skip
-    """:func:`train` behind a rich progress bar on ``console`` (return, success, KL and steps/s so far)."""
+                        description: str | None = None) -> RunSummary:  # fmt: skip
+    """:func:`train` behind a rich progress bar on ``console`` (return, success, KL and steps/s so far).
+
+    Before the first iteration it prints what will actually run when that differs from ``cfg.steps``
+    (:meth:`StepPlan.note`); the bar counts the run's real steps against the real total (a Manager's total, unknown
+    until it ends, is ``cfg.steps`` until passed). Warnings (:data:`REJECTED_STEPS_WARNING` rejected TRPO steps in a
+    row) are printed above the bar. Returns the :class:`RunSummary`."""
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+    console = console or Console(stderr=True)
     columns = [TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                TextColumn("{task.fields[status]}")]  # fmt: skip
+    summary = RunSummary()
+    streak = 0
     with Progress(*columns, console=console) as progress:
-        bar = progress.add_task(description or f"train {cfg.task}", total=cfg.steps, status="")
-        for st in train(cfg, run_dir, resume=resume):
+        start, bar_total, bar = 0, cfg.steps, None
+
+        def started(plan: StepPlan) -> None:  # the bar appears once the run is set up (an error before: one line only)
+            nonlocal start, bar_total, bar
+            start, bar_total = plan.done, plan.total or max(plan.requested, plan.done)
+            if (note := plan.note()) is not None:
+                progress.console.print(f"[bold]note:[/] {note}", soft_wrap=True)
+            bar = progress.add_task(description or f"train {cfg.task}", total=bar_total, completed=plan.done, status="")
+
+        def warned(message: str) -> None:
+            summary.warnings.append(message)
+            progress.console.print(f"[bold yellow]warning:[/] {message}", soft_wrap=True)
+
+        for st in train(cfg, run_dir, resume=resume, on_start=started, on_warning=warned):
             status = f"return {st['return_mean']:.1f}"
             if not math.isnan(st["success_rate"]):
                 status += f"  success {st['success_rate']:.2f}"
             status += f"  kl {st['trpo/kl']:.4f}  {st['time/steps_per_s']:.0f} steps/s"
-            progress.update(bar, completed=min(st["env_steps"], cfg.steps), status=status)
+            done = int(st["env_steps"])
+            bar_total = max(bar_total, done)  # a Manager's last iteration passes cfg.steps: the bar says by how much
+            assert bar is not None
+            progress.update(bar, completed=done, total=bar_total, status=status)
+            summary.iterations += 1
+            summary.env_steps, summary.env_steps_this_session = done, done - start
+            streak = 0 if st.get("trpo/accepted", 1.0) else streak + 1
+            summary.rejected += streak > 0
+            summary.longest_rejected_streak = max(summary.longest_rejected_streak, streak)
+        if summary.iterations == 0:
+            summary.env_steps = start
+    return summary
 
 
 def _truncate_log(path: Path, iteration: int) -> None:

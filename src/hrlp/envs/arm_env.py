@@ -85,6 +85,7 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
         self._t = 0
         self._success = False
         self._sums = [0.0] * len(task.tracked)
+        self._maxes = [0.0] * len(task.tracked_max)
         self._needs_reset = True
 
     # --- Gymnasium API ------------------------------------------------------------------------
@@ -101,6 +102,7 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
         self._t = 0
         self._success = self.task.success(p)
         self._sums = [0.0] * len(self.task.tracked)
+        self._maxes = [float(v) for v in self.task.track_max(p)]
         self._needs_reset = False
         return self._observe().copy(), {"success": self._success}
 
@@ -128,6 +130,11 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
                 self._sums[i] += v
             for name, v in zip(self.task.tracked, self._sums, strict=True):
                 info[f"{name}_sum"] = v
+        if self._maxes:
+            for i, v in enumerate(self.task.track_max(p)):
+                self._maxes[i] = max(self._maxes[i], float(v))
+            for name, v in zip(self.task.tracked_max, self._maxes, strict=True):
+                info[f"{name}_max"] = v
         self._needs_reset = truncated
         return self._observe().copy(), sum(terms.values()), False, truncated, info
 
@@ -163,6 +170,7 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
             "episodes": self._episodes,
             "success": self._success,
             "sums": list(self._sums),
+            "maxes": list(self._maxes),
             "needs_reset": self._needs_reset,
             "rng": self._rng.bit_generator.state,  # PCG64: a dict of ints, JSON as it is
             "task": {k: np.asarray(v).tolist() for k, v in self.task.episode_state().items()},
@@ -182,6 +190,8 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
         self._t, self._episodes = int(state["t"]), int(state["episodes"])
         self._success, self._needs_reset = bool(state["success"]), bool(state["needs_reset"])
         self._sums = [float(v) for v in state["sums"]]
+        # A state saved before the maxima were tracked restarts them from the current step.
+        self._maxes = [float(v) for v in state.get("maxes", self.task.track_max(p))]
         self._rng = np.random.default_rng()
         self._rng.bit_generator.state = state["rng"]
         self.task.set_episode_state({k: np.asarray(v) for k, v in state["task"].items()})

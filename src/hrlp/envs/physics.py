@@ -123,6 +123,11 @@ class ArmPhysics:
             g for g in range(m.ngeom) if g not in (self._table, self._object_geom, m.geom("target").id)
         )
         self._renderer: mujoco.Renderer | None = None
+        # MuJoCo's instability warning counters, as views into MjData (read after every step, see step()).
+        w, kinds = self.data.warning, mujoco.mjtWarning
+        bad = (kinds.mjWARN_BADQPOS, kinds.mjWARN_BADQVEL, kinds.mjWARN_BADQACC)
+        self._instability_counters = tuple(w[int(k)] for k in bad)
+        self._last_warnings = {"bad_qpos": 0, "bad_qvel": 0, "bad_qacc": 0}
         # Views into MjData (its arrays are never reallocated): reading a measurement costs no indexing.
         d = self.data
         self._hand_v = d.site_xpos[self._hand]
@@ -246,26 +251,34 @@ class ArmPhysics:
     def step(self, ctrl: np.ndarray) -> bool:
         """Advance one control period with torques ``ctrl`` in [-1, 1]^9.
 
-        Returns False if MuJoCo hit an instability during the step. MuJoCo then resets the
-        state itself (mj_checkPos/Vel/Acc) and raises a warning counter; we detect it with the
-        simulated clock, which the reset sets back, so the check costs one float comparison.
+        Returns False if MuJoCo hit an instability during the step (a NaN, inf or huge position, velocity or
+        acceleration). MuJoCo then resets the state itself (mj_checkPos/Vel/Acc) and raises one of its warning
+        counters (``data.warning[mjWARN_BADQPOS/BADQVEL/BADQACC]``); those counters are what is read here, so a
+        blow-up is flagged at any step and substep, the first of an episode included (the simulated clock, which the
+        reset sets back to 0, cannot tell a reset from a start at 0). Reading them costs well under a microsecond;
+        they are set back to 0 once read, so every flagged step is a new one (:meth:`instability_warnings` keeps the
+        counts of the last flagged step).
         """
         d = self.data
-        t0 = d.time
         d.ctrl[:] = ctrl  # MuJoCo clamps to ctrlrange because the motors are ctrllimited.
         start = time.thread_time()  # CPU time: a process preempted mid-step is not counted as physics
         mujoco.mj_step(self.model, d, self.config.substeps)
         self.physics_seconds += time.thread_time() - start
-        return d.time > t0
+        qpos_w, qvel_w, qacc_w = self._instability_counters
+        if qpos_w.number or qvel_w.number or qacc_w.number:
+            self._last_warnings = {
+                "bad_qpos": int(qpos_w.number),
+                "bad_qvel": int(qvel_w.number),
+                "bad_qacc": int(qacc_w.number),
+            }
+            qpos_w.number = qvel_w.number = qacc_w.number = 0
+            return False
+        return True
 
     def instability_warnings(self) -> dict[str, int]:
-        """Counts of MuJoCo's instability warnings so far (bad qpos, qvel, qacc)."""
-        w = self.data.warning
-        return {
-            "bad_qpos": int(w[mujoco.mjtWarning.mjWARN_BADQPOS].number),
-            "bad_qvel": int(w[mujoco.mjtWarning.mjWARN_BADQVEL].number),
-            "bad_qacc": int(w[mujoco.mjtWarning.mjWARN_BADQACC].number),
-        }
+        """Counts of MuJoCo's instability warnings (bad qpos, qvel, qacc) raised during the last step that
+        reported an instability (all 0 if none has)."""
+        return dict(self._last_warnings)
 
     # --- kinematics helpers -------------------------------------------------------------------
     def hand_at(self, qpos: np.ndarray) -> np.ndarray:

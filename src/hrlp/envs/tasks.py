@@ -67,6 +67,9 @@ class Task(abc.ABC):
     extra_obs_dim: int = 0
     #: Names of per-step quantities the environment sums over the episode and reports in ``info``.
     tracked: tuple[str, ...] = ()
+    #: Names of per-step quantities whose largest value over the episode (from its start state on) the environment
+    #: reports in ``info`` as ``NAME_max``.
+    tracked_max: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -91,6 +94,10 @@ class Task(abc.ABC):
 
     def track(self, physics: ArmPhysics) -> tuple[float, ...]:
         """Per-step values of :attr:`tracked`."""
+        return ()
+
+    def track_max(self, physics: ArmPhysics) -> tuple[float, ...]:
+        """Per-step values of :attr:`tracked_max`."""
         return ()
 
     def episode_state(self) -> dict[str, np.ndarray]:
@@ -325,6 +332,28 @@ def _grip_terms(reward: GripReward, sparse: SparseSuccess, physics: ArmPhysics) 
     return terms
 
 
+#: The bank name under which ``hrlp dagger`` stores hand-over states.
+HANDOVER_BANK = "handover"
+
+
+@functools.cache
+def start_bank(path: str, name: str = HANDOVER_BANK) -> tuple[np.ndarray, np.ndarray]:
+    """The ``(qpos [S, nq], qvel [S, nv])`` start states stored under ``name`` in the ``.npz`` at ``path`` (no pickle).
+
+    Raises ValueError naming the file for a missing file, a file that is not such a bank, or non-finite states."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            qpos, qvel = z[f"{name}_qpos"].astype(np.float64), z[f"{name}_qvel"].astype(np.float64)
+    except (OSError, KeyError, ValueError) as e:
+        raise ValueError(f"start bank {path}: cannot read its {name!r} states ({e})") from None
+    if qpos.ndim != 2 or qvel.ndim != 2 or len(qpos) != len(qvel) or len(qpos) == 0:
+        raise ValueError(f"start bank {path}: {name!r} states must be [S, nq] and [S, nv] with S > 0, got "
+                         f"{qpos.shape} and {qvel.shape}")  # fmt: skip
+    if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
+        raise ValueError(f"start bank {path}: {name!r} states contain NaN or inf")
+    return qpos, qvel
+
+
 @dataclass(frozen=True)
 class GripperTask(Task):
     """Gripper (Section 4.1, Experiment 1): grip the capsule with the palm starting close to it.
@@ -336,6 +365,9 @@ class GripperTask(Task):
     between fingers opened by about 0.8 rad, so starts closer than 5 cm need an opening; the
     shipped Gripper skill trains on ``start_distance=(0, 0.09)``, ``finger_opening=(0, 1)``: the
     paper's "many close positions" (Section 4.1).
+    With ``starts``, a share ``starts_fraction`` of the episodes begins instead from a physics state of a start
+    bank (an ``.npz`` written by :func:`hrlp.skills.starts.write_start_bank`, read without pickle): the states at
+    which a Manager handed over to the Gripper (``hrlp dagger``, the paper's Appendix C).
     Reward: :class:`GripReward`. Success: :class:`SparseSuccess` (Definition 1).
     """
 
@@ -343,6 +375,10 @@ class GripperTask(Task):
     """Reward constants c1, c2, c3, tr."""
     sparse: SparseSuccess = SparseSuccess()
     """Definition 1 thresholds."""
+    starts: str | None = None
+    """Path of a start bank (its ``handover_qpos``/``handover_qvel`` arrays), or None for the task's own starts only."""
+    starts_fraction: float = 1.0
+    """With ``starts``, the share of episodes that begin from the bank (the rest from the task's own start set)."""
     angle_range: float = math.pi
     """Half-width of the capsule's start angle, radians (pi: the full circle)."""
     start_distance: tuple[float, float] = (0.05, 0.09)
@@ -361,9 +397,19 @@ class GripperTask(Task):
             ):
                 raise ValueError(f"GripperTask.{name} must be a range (low, high) with 0 <= low <= high <= {top}, got {v!r}")
             object.__setattr__(self, name, (float(v[0]), float(v[1])))
+        if not (isinstance(self.starts_fraction, int | float) and 0 <= self.starts_fraction <= 1):
+            raise ValueError(f"GripperTask.starts_fraction must be in [0, 1], got {self.starts_fraction!r}")
+        if self.starts is not None:
+            start_bank(str(self.starts))  # a missing or malformed bank fails here, when the task is made
 
     def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
         _hide_target(physics)
+        if self.starts is not None and rng.uniform() < self.starts_fraction:
+            qpos, qvel = start_bank(str(self.starts))
+            i = int(rng.integers(len(qpos)))
+            physics.set_state_vectors(qpos[i], qvel[i])
+            physics.forward()
+            return
         c = _place_capsule(physics, _angle(rng, self.angle_range))
         (d0, d1), (f0, f1) = self.start_distance, self.finger_opening
         arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, d0, d1), fingers=lambda: rng.uniform(f0, f1), tries=200)
@@ -435,6 +481,15 @@ class ReachAndGripTask(Task):
 MOVER_VARIANTS = ("plain", "noised")
 
 
+#: What moving tasks report beyond TargetDistSum: ``closest_max`` = -min_t d(C, T) and ``lift_max`` = the capsule's
+#: greatest height above its resting height (metres) over the episode.
+MOVE_EXTREMES = ("closest", "lift")
+
+
+def _move_extremes(physics: ArmPhysics) -> tuple[float, float]:
+    return -physics.capsule_to_target(), float(physics.capsule[2]) - CAPSULE_REST_Z
+
+
 #: Where ``MoverTask(starts="grip")`` draws its starts from (``scripts/make_mover_starts.py`` writes it).
 MOVER_STARTS_FILE = "assets/mover_starts.npz"
 MOVER_STARTS = ("grip", "placed")
@@ -481,6 +536,7 @@ class MoverTask(Task):
     """'grip' (states along the Gripper skill's successful episodes) or 'placed' (hand placed by IK, claw at rest)."""
     extra_obs_dim = 3
     tracked = ("target_dist",)
+    tracked_max = MOVE_EXTREMES
 
     def __post_init__(self) -> None:
         if self.variant not in MOVER_VARIANTS:
@@ -540,6 +596,9 @@ class MoverTask(Task):
     def track(self, physics: ArmPhysics) -> tuple[float, ...]:
         return (-physics.capsule_to_target(),)
 
+    def track_max(self, physics: ArmPhysics) -> tuple[float, ...]:
+        return _move_extremes(physics)
+
 
 @dataclass(frozen=True)
 class ReachAndMoveTask(Task):
@@ -560,6 +619,7 @@ class ReachAndMoveTask(Task):
     """A step succeeds when d(C, T) is below this, metres."""
     extra_obs_dim = 3
     tracked = ("target_dist",)
+    tracked_max = MOVE_EXTREMES
 
     def __post_init__(self) -> None:
         _nonneg(self, "target_coeff")
@@ -581,6 +641,9 @@ class ReachAndMoveTask(Task):
 
     def track(self, physics: ArmPhysics) -> tuple[float, ...]:
         return (-physics.capsule_to_target(),)
+
+    def track_max(self, physics: ArmPhysics) -> tuple[float, ...]:
+        return _move_extremes(physics)
 
 
 __all__ = [

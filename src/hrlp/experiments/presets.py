@@ -14,10 +14,10 @@ import math
 from dataclasses import dataclass, field, replace
 
 from hrlp.algos.trpo import TRPOConfig
-from hrlp.skills.macro_env import MacroSpec, MicroAction
+from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 from hrlp.train import TrainConfig
 
-#: The shipped Gripper skill's start set and training settings (scripts/train_shipped_skills.sh).
+#: The shipped Gripper skill's start set (its recipe: the ``shipped-skills`` preset).
 GRIPPER_START = {"start_distance": [0.0, 0.09], "finger_opening": [0.0, 1.0]}
 
 
@@ -29,6 +29,10 @@ class Run:
     config: TrainConfig
     paper: float | None = None
     """The paper's value of the preset's metric for this run (None where the paper gives none)."""
+    steps: int | None = None
+    """This run's own budget, environment steps (None: the preset's ``budget``; ``--budget`` overrides both)."""
+    skill: tuple[str, int] | None = None
+    """For a run that trains a shipped skill: the skill's name and default duration k (``hrlp skills build``)."""
 
 
 @dataclass(frozen=True)
@@ -50,11 +54,11 @@ class Preset:
 
     def with_budget(self, steps: int) -> Preset:
         """The preset with every run's step budget set to ``steps``."""
-        return replace(self, budget=steps)
+        return replace(self, budget=steps, runs=tuple(replace(r, steps=None) for r in self.runs))
 
     def config(self, run: Run, seed: int) -> TrainConfig:
-        """The full config of ``run`` with ``seed`` and this preset's budget."""
-        return replace(run.config, seed=seed, steps=self.budget)
+        """The full config of ``run`` with ``seed`` and its budget (its own, else the preset's)."""
+        return replace(run.config, seed=seed, steps=run.steps or self.budget)
 
 
 def _flat(task: str, batch: int = 50_000, **kw: object) -> TrainConfig:
@@ -80,6 +84,14 @@ def _tuned_manager(skills: tuple[str, ...], micro: bool) -> TrainConfig:
 def _experiment_1(c2: float, tr: float) -> TrainConfig:
     """reach-and-grip Experiment 1 at one cell of Figure 6: a Manager over gripper + reacher, k = 10."""
     return _manager("ReachAndGrip1", ("gripper", "reacher"), 10, task_kwargs={"c2": c2, "tr": tr})
+
+
+def _handover(config: TrainConfig) -> TrainConfig:
+    """A Manager's config with its point skills driven for hand-over (:class:`~hrlp.skills.macro_env.Handover`: goals
+    relative to the capsule, approach from above, claw held open) and its parameters' initial std e^-1 of their box's
+    half-width, so that its first goals fall near the capsule."""
+    assert config.macro is not None
+    return replace(config, macro=replace(config.macro, handover=Handover()), init_log_std=-1.0)
 
 
 def _kl(max_kl: float) -> TRPOConfig:
@@ -162,9 +174,37 @@ def _appendix_c_tuned() -> tuple[Preset, ...]:
     )
 
 
+def _shipped_skills() -> Preset:
+    """The recipes of the skills shipped in ``src/hrlp/skills/pretrained/`` (``hrlp skills build`` trains them and adds
+    them to a library; a test checks that every shipped skill's manifest records exactly its run's config)."""
+    return Preset(
+        "shipped-skills",
+        "the shipped skills: Reacher; Gripper from many close, open-claw starts (c3 -8 and a bonus c4 10 while gripped: "
+        "with the paper's three-term reward alone it hovers); Reacher3D; ReacherStabilised (level_coeff 0.1: with 0.5 no "
+        "goal near the table is reached); the Movers from grip starts (scripts/make_mover_starts.py records them from "
+        "the Gripper); docs/skills.md",
+        "Section 4.1",
+        (
+            Run("reacher", _flat("Reacher", 25_000), steps=3_000_000, skill=("reacher", 15)),
+            Run("gripper", _flat("Gripper", 25_000, episode_steps=100, init_log_std=-1.0,
+                                 task_kwargs={**GRIPPER_START, "c3": -8, "c4": 10}), steps=8_000_000, skill=("gripper", 15)),
+            Run("reacher3d", _flat("Reacher3D", 25_000), steps=2_000_000, skill=("reacher3d", 15)),
+            Run("s-reacher", _flat("ReacherStabilised", 25_000, task_kwargs={"level_coeff": 0.1}), steps=2_000_000,
+                skill=("s-reacher", 15)),
+            Run("mover-noised", _flat("MoverNoised", 25_000, episode_steps=100, init_log_std=-1.0), steps=8_000_000,
+                skill=("mover-noised", 8)),
+            Run("mover-plain", _flat("MoverPlain", 25_000, episode_steps=100, init_log_std=-1.0), steps=8_000_000,
+                skill=("mover-plain", 8)),
+        ),
+        seeds=(0,),
+        budget=8_000_000,
+    )  # fmt: skip
+
+
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
+        _shipped_skills(),
         Preset(
             "gripper-grid",
             "Gripper over the reward grid c2 x tr of Figure 6, the paper's start set widened to close, open-claw starts "
@@ -235,6 +275,34 @@ PRESETS: dict[str, Preset] = {
             "Section 4.3.1, Figure 6",
             tuple(Run(f"gripper+reacher,c2={c2},tr={tr}", _tuned(_experiment_1(c2, tr)), _FIG6[(c2, tr)]) for c2, tr in _GRID),
             budget=3_000_000,
+        ),
+        Preset(
+            "reach-and-grip-1-handover",
+            "Figure 6's grid (Experiment 1, gripper + reacher, k = 10, c2 x tr) at the headline's Manager settings, the "
+            "Reacher driven for hand-over (capsule-relative goals, approach from above, claw held open)",
+            "Section 4.3.1, Figure 6",
+            tuple(
+                Run(f"gripper+reacher,c2={c2},tr={tr}", _handover(_tuned(_experiment_1(c2, tr))), _FIG6[(c2, tr)])
+                for c2, tr in _GRID
+            ),
+            budget=1_000_000,
+        ),
+        Preset(
+            "reach-and-grip-2-handover",
+            "Figure 7's grid (Experiment 2, k = 15) for the skill sets with a Reacher, at the headline's Manager "
+            "settings, the Reacher driven for hand-over (capsule-relative goals, approach from above, claw held open)",
+            "Section 4.3.1, Figure 7",
+            tuple(
+                Run(
+                    f"{label},c2={c2},tr={tr}",
+                    _handover(replace(_tuned_manager(*_FIG7_SKILLS[label]), task_kwargs={"c2": c2, "tr": tr})),
+                    paper,
+                )
+                for label, cells in _FIG7.items()
+                if label != "gripper+micro"
+                for (c2, tr), paper in cells.items()
+            ),
+            budget=2_000_000,
         ),
         Preset(
             "reach-and-grip-2",

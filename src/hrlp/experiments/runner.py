@@ -6,11 +6,16 @@ skipped; interrupted runs resume from their checkpoints; a larger ``--budget`` c
 runs. A run whose full config (seed and budget included) matches a finished run of another preset under the
 same ``OUT`` is copied from it instead of trained again: training is deterministic given the config, so the copy
 is the run this job would have made. Every job trains in its own process with one torch thread.
+
+A job holds the OS lock of its run directory (:func:`hrlp.atomic.directory_lock`) from the moment it decides what to
+do until its ``result.json`` is written, so two ``hrlp reproduce`` on one ``--out`` never write one run at once: the
+second fails with a one-line error naming the run directory (and the jobs it has not started are cancelled).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import time
@@ -22,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from hrlp.atomic import atomic_path
+from hrlp.atomic import LOCK_FILE, atomic_path, directory_lock
+from hrlp.checkpoint import checkpoint_exists
 from hrlp.experiments.presets import PRESETS, Preset
 from hrlp.train import TrainConfig
 
@@ -94,25 +100,44 @@ def find_same_run(job: Job) -> Path | None:
 
 
 def copy_run(job: Job, source: Path) -> dict[str, Any]:
-    """Copy the finished run ``source`` into ``job.run_dir`` (atomically: a temporary sibling, then a rename) with its
-    result relabelled to ``job``'s preset and run, and return that result."""
+    """Copy the finished run ``source`` into ``job.run_dir`` with its result relabelled to ``job``'s preset and run, and
+    return that result.
+
+    The copy is made in a temporary sibling, then moved into ``job.run_dir`` (which may exist, holding the job's lock)
+    entry by entry, the checkpoint next to last and ``result.json`` last: a copy killed half-way leaves no result and
+    no checkpoint, so the next attempt copies again."""
     found = read_result(source)
     assert found is not None
     result = {**found, "preset": job.preset, "run": job.run, "paper": job.paper}
     # A copy of a copy names the run that was trained.
     result["copied_from"] = found.get("copied_from") or str(source.relative_to(job.run_dir.parents[2]))
-    job.run_dir.parent.mkdir(parents=True, exist_ok=True)
+    job.run_dir.mkdir(parents=True, exist_ok=True)
     tmp = job.run_dir.with_name(job.run_dir.name + ".copying")
     shutil.rmtree(tmp, ignore_errors=True)
-    shutil.copytree(source, tmp)
-    _write_json(tmp / "result.json", result)
-    tmp.rename(job.run_dir)
+    shutil.copytree(source, tmp, ignore=shutil.ignore_patterns(LOCK_FILE, "result.json"))
+    entries = sorted(tmp.iterdir(), key=lambda p: p.name == "checkpoint")
+    for entry in entries:
+        target = job.run_dir / entry.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        os.replace(entry, target)
+    tmp.rmdir()
+    _write_json(job.run_dir / "result.json", result)
     return result
 
 
 def run_job(job: Job, reuse: bool = True) -> dict[str, Any]:
     """Train (or resume) and evaluate one job, write ``result.json`` atomically and return it; skip if done, copy
     if ``reuse`` and another preset under the same root has finished the same run (:func:`find_same_run`)."""
+    done = read_result(job.run_dir)
+    if done is not None and done["env_steps"] >= job.config.steps:
+        return {**done, "skipped": True}
+    with directory_lock(job.run_dir):
+        return _run_job_locked(job, reuse)
+
+
+def _run_job_locked(job: Job, reuse: bool) -> dict[str, Any]:
+    """:func:`run_job` under the run directory's lock (another process may have finished the job meanwhile)."""
     import torch
 
     from hrlp.evaluate import evaluate_run
@@ -122,10 +147,10 @@ def run_job(job: Job, reuse: bool = True) -> dict[str, Any]:
     done = read_result(job.run_dir)
     if done is not None and done["env_steps"] >= job.config.steps:
         return {**done, "skipped": True}
-    if reuse and not job.run_dir.exists() and (source := find_same_run(job)) is not None:
+    resume = checkpoint_exists(job.run_dir / "checkpoint")  # the .old copy a kill between renames leaves counts
+    if reuse and not resume and done is None and (source := find_same_run(job)) is not None:
         return copy_run(job, source)
     torch.set_num_threads(1)
-    resume = (job.run_dir / "checkpoint").exists()
     for _ in train(job.config, job.run_dir, resume=resume):
         pass
     t0 = time.perf_counter()
@@ -144,6 +169,7 @@ def run_job(job: Job, reuse: bool = True) -> dict[str, Any]:
         "return": vars(ev.ret),
         "target_dist_sum": None if ev.target_dist_sum is None else vars(ev.target_dist_sum),
         "macro_usage": ev.macro_usage,
+        "move": None if ev.move is None else {k: vars(v) for k, v in vars(ev.move).items()},
         "paper": job.paper,
     }
     _write_json(job.run_dir / "result.json", result)
@@ -203,9 +229,14 @@ def reproduce(
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
         futures = [pool.submit(run_job, j, reuse) for j in jobs]
-        for f in as_completed(futures):
-            res = f.result()
-            results.append(res)
-            if on_result:
-                on_result(res)
+        try:
+            for f in as_completed(futures):
+                res = f.result()
+                results.append(res)
+                if on_result:
+                    on_result(res)
+        except BaseException:
+            for f in futures:  # a failed job (e.g. a run directory another process holds) stops the jobs not started
+                f.cancel()
+            raise
     return results

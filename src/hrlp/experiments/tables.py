@@ -6,10 +6,15 @@ and wall time), a PNG of the learning curves (mean over seeds with a min-max ban
 hyperparameter sweep a scatter of one dot per run against the swept value (the paper's Figures 4,
 8 and 10), and for success presets a sample-efficiency table: the environment steps until the
 smoothed training success rate first reaches given thresholds, with right-censored seeds.
+
+``hrlp tables`` never replaces a file it did not write (see :func:`build_tables`): it records every file it writes,
+with its sha256, in ``OUT/.hrlp-tables.json``, and replaces a file only when that record lists it with its current
+content, or when asked to (``overwrite``, ``--overwrite``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections import defaultdict
@@ -20,12 +25,16 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from hrlp.atomic import atomic_path, writing
 from hrlp.experiments.presets import PRESETS
 
 DEFAULT_THRESHOLDS: tuple[float, ...] = (0.05, 0.1, 0.2)
 """Training success rates whose first crossing the sample-efficiency table reports."""
 SMOOTHING_WINDOW = 3
 """Iterations in the trailing average of the training success rate, so one lucky iteration does not count."""
+MANIFEST = ".hrlp-tables.json"
+"""The record, in the output directory, of the files ``hrlp tables`` wrote there: ``{"format": 1, "files": {name:
+sha256}}``."""
 
 
 def bootstrap_interval(values: list[float], confidence: float = 0.95, seed: int = 0) -> tuple[float, float, float]:
@@ -47,6 +56,24 @@ def metric_value(result: dict[str, Any], metric: str) -> float | None:
     """The run's value of ``metric`` ('success' rate or mean 'target_dist_sum')."""
     v = result.get(metric)
     return None if v is None else float(v["mean"])
+
+
+def move_cell(results: list[dict[str, Any]]) -> str:
+    """What a moving run did beyond TargetDistSum, mean over its seeds: success, share of episodes with the capsule
+    lifted, min d(C, T) and TargetDistSum minus an untouched capsule's ('-' for runs evaluated before these were)."""
+    moves = [(r["success"], r["move"]) for r in results if r.get("move") and r.get("success")]
+    if not moves:
+        return "-"
+
+    def mean(values: list[float]) -> float:
+        return sum(values) / len(values)
+
+    success = mean([s["mean"] for s, _ in moves])
+    lifted = mean([m["lift_rate"]["mean"] for _, m in moves])
+    closest = mean([m["min_target_dist"]["mean"] for _, m in moves])
+    relative = mean([m["relative_target_dist_sum"]["mean"] for _, m in moves])
+    untouched = mean([m["untouched_target_dist_sum"]["mean"] for _, m in moves])
+    return f"{_g(success)} / {_g(lifted)} / {closest:.3f} m / {relative:+.1f} (untouched {untouched:.1f})"
 
 
 def usage_cell(results: list[dict[str, Any]]) -> str:
@@ -115,7 +142,16 @@ def sweep_x(preset: str, config: dict[str, Any]) -> float | None:
 # --- grids: presets whose runs are ROW,COLUMN cells of one of the paper's figures (Figure 7) ------------------------
 
 #: Presets laid out as the paper's Figures 6 and 7: run ``SKILLS,c2=X,tr=Y`` is row SKILLS, column ``c2=X,tr=Y``.
-GRIDS = frozenset({"reach-and-grip-1", "reach-and-grip-1-tuned", "reach-and-grip-2", "reach-and-grip-2-tuned"})
+GRIDS = frozenset(
+    {
+        "reach-and-grip-1",
+        "reach-and-grip-1-tuned",
+        "reach-and-grip-1-handover",
+        "reach-and-grip-2",
+        "reach-and-grip-2-tuned",
+        "reach-and-grip-2-handover",
+    }
+)
 
 
 def grid_lines(cells: dict[str, tuple[str, float | None]]) -> list[str]:
@@ -326,14 +362,57 @@ def _median_cell(c: Crossing) -> str:
     return f"{'' if exact else '≥ '}{format_steps(med)} ({c.n_reached}/{len(c.steps)})"
 
 
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def read_manifest(out: Path) -> dict[str, str]:
+    """``{file name: sha256}`` of the files ``hrlp tables`` wrote to ``out`` (:data:`MANIFEST`); {} if none (or a
+    manifest that cannot be read, which then vouches for nothing)."""
+    try:
+        doc = json.loads((Path(out) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return {}
+    files = doc.get("files") if isinstance(doc, dict) else None
+    if not isinstance(files, dict):
+        return {}
+    return {k: v for k, v in files.items() if isinstance(k, str) and isinstance(v, str)}
+
+
+def foreign_files(out: Path, names: Sequence[str]) -> list[str]:
+    """Those of ``names`` that exist in ``out`` but were not written there by ``hrlp tables`` as they are now: not in
+    its manifest, or changed since (their sha256 differs from the recorded one)."""
+    recorded = read_manifest(out)
+    return [n for n in names if (Path(out) / n).exists() and recorded.get(n) != _sha256(Path(out) / n)]
+
+
+def _record(out: Path, written: Path) -> None:
+    """Add ``written`` (a file in ``out``) with its current sha256 to the manifest, atomically."""
+    files = read_manifest(out)
+    files[written.name] = _sha256(written)
+    with atomic_path(out / MANIFEST) as tmp:
+        tmp.write_text(json.dumps({"format": 1, "files": dict(sorted(files.items()))}, indent=2) + "\n")
+
+
+def default_out(root: Path) -> Path:
+    """Where ``hrlp tables --root ROOT`` writes without ``--out``: ``ROOT/tables``, beside the runs it is built from
+    (never a directory of committed results, such as ``docs/results``)."""
+    return Path(root) / "tables"
+
+
 def build_tables(
     root: Path,
     out: Path,
     thresholds: Sequence[float] = DEFAULT_THRESHOLDS,
     window: int = SMOOTHING_WINDOW,
+    overwrite: bool = False,
 ) -> list[Path]:
     """Write ``out/PRESET.md`` and ``out/PRESET.png`` for every preset with results, and ``out/PRESET_scatter.png`` for
     presets that sweep a hyperparameter (:data:`SWEEPS`); returns the files written.
+
+    A file of those names that already exists is replaced only if this function wrote it (it is listed in
+    ``out/.hrlp-tables.json`` with the sha256 it has now: not edited since) or ``overwrite`` is true; otherwise
+    ValueError names the files, before anything is written. Each file written is recorded in that manifest.
 
     Each run's cell is the mean over seeds with a 95% percentile-bootstrap interval across seeds; a run with a
     single seed shows that run's own interval over its evaluation episodes (Wilson for success). Presets whose
@@ -349,8 +428,28 @@ def build_tables(
     data = collect(root)
     if not data:
         raise ValueError(f"no finished runs (result.json) under {root}; run 'hrlp reproduce PRESET' first")
-    out.mkdir(parents=True, exist_ok=True)
+    out = Path(out)
+    planned = []
+    for preset_name, runs in data.items():
+        preset = PRESETS.get(preset_name)
+        order = [r.name for r in preset.runs if r.name in runs] if preset else sorted(runs)
+        metric = preset.metric if preset else "success"
+        planned += [f"{preset_name}.md", f"{preset_name}.png"]
+        axis = SWEEPS.get(preset_name)
+        if axis is not None and _sweep_groups(preset_name, metric, [runs[n] for n in order]):
+            planned.append(f"{preset_name}_scatter.png")
+    if not overwrite and (foreign := foreign_files(out, planned)):
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise ValueError(f"{out}: would replace {shown}, which hrlp tables did not write there (or which changed since); "
+                         "pass --overwrite to replace them, or choose another --out")  # fmt: skip
+    with writing(out):
+        out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
+
+    def wrote(path: Path) -> None:
+        _record(out, path)
+        written.append(path)
+
     for preset_name, runs in data.items():
         preset = PRESETS.get(preset_name)
         metric = preset.metric if preset else "success"
@@ -376,10 +475,12 @@ def build_tables(
                 "wall time is that of the original runs.",
                 "",
             ]
+        moving = metric == "target_dist_sum"
         lines += [
             "| run | seeds | ours | paper | env steps per run | wall time (h, all seeds) |"
+            + (" success / lifted / min d(C, T) / TargetDistSum minus untouched |" if moving else "")
             + (" decisions per skill (mean over seeds) |" if managers else ""),
-            "|---|---:|---|---:|---:|---:|" + ("---|" if managers else ""),
+            "|---|---:|---|---:|---:|---:|" + ("---|" if moving else "") + ("---|" if managers else ""),
         ]
         grid: dict[str, tuple[str, float | None]] = {}
         for name in order:
@@ -396,7 +497,9 @@ def build_tables(
             ours = f"{_g(m)} [{_g(lo)}, {_g(hi)}]"
             star = "*" if any(r.get("copied_from") for r in results) else ""
             row = f"| {name}{star} | {len(results)} | {ours} | {paper_cell} | {steps_cell} | {wall:.2f} |"
-            lines.append(row + (f" {usage_cell(results)} |" if managers else ""))
+            lines.append(
+                row + (f" {move_cell(results)} |" if moving else "") + (f" {usage_cell(results)} |" if managers else "")
+            )
             grid[name] = (_g(m), paper)
         if preset_name in GRIDS:
             lines += ["", f"The same as the paper's figure lays it out: {metric.replace('_', ' ')}, ours (paper's).", ""]
@@ -408,13 +511,14 @@ def build_tables(
             }
             lines += ["", *sample_efficiency_lines(logs, thresholds, window)]
         md = out / f"{preset_name}.md"
-        md.write_text("\n".join(lines) + "\n")
-        written.append(md)
+        with atomic_path(md) as tmp:
+            tmp.write_text("\n".join(lines) + "\n")
+        wrote(md)
         curves = {name: [d for d, _ in runs[name]] for name in order}
         metrics = ("success_rate", "return_mean") if metric == "success" else ("target_dist_sum", "return_mean")
-        written.append(plot_learning_curves(curves, out / f"{preset_name}.png", metrics=metrics, title=preset_name))
+        wrote(plot_learning_curves(curves, out / f"{preset_name}.png", metrics=metrics, title=preset_name))
         if axis is not None and (scatter := _sweep_scatter(preset_name, axis, metric, [runs[n] for n in order], out)):
-            written.append(scatter)
+            wrote(scatter)
     return written
 
 
@@ -424,6 +528,17 @@ def _sweep_scatter(
     """``out/PRESET_scatter.png``: every seed's final ``metric`` at its run's swept value; None if no run has both."""
     from hrlp.plots import plot_sweep
 
+    groups = _sweep_groups(preset_name, metric, runs)
+    if not groups:
+        return None
+    ylabel = {"success": "success rate (Definition 1)", "target_dist_sum": "TargetDistSum"}.get(metric, metric)
+    return plot_sweep(groups, out / f"{preset_name}_scatter.png", axis.label, ylabel, axis.log, preset_name)
+
+
+def _sweep_groups(
+    preset_name: str, metric: str, runs: list[list[tuple[Path, dict[str, Any]]]]
+) -> list[tuple[float, list[float]]]:
+    """The scatter's ``(swept value, seeds' metric values)`` per run that has both."""
     groups = []
     for seeds in runs:
         xs = {sweep_x(preset_name, r["config"]) for _, r in seeds}
@@ -431,10 +546,7 @@ def _sweep_scatter(
         x = xs.pop() if len(xs) == 1 else None
         if x is not None and ys:
             groups.append((x, ys))
-    if not groups:
-        return None
-    ylabel = {"success": "success rate (Definition 1)", "target_dist_sum": "TargetDistSum"}.get(metric, metric)
-    return plot_sweep(groups, out / f"{preset_name}_scatter.png", axis.label, ylabel, axis.log, preset_name)
+    return groups
 
 
 def _g(x: float) -> str:

@@ -60,6 +60,9 @@ class RunningNormalizer:
         Parallel merge of Chan et al. (1979): with ``delta = mean_b - mean`` and ``n = count + B``,
         ``mean += delta * B / n`` and ``M2 = var * count + var_b * B + delta^2 * count * B / n``, ``var = M2 / n``;
         exact for any split of the data into batches.
+
+        Raises ValueError naming the first row and dimension holding a NaN or inf, before changing anything: one such
+        value would make the statistics NaN for good.
         """
         if self.frozen:
             return
@@ -67,6 +70,11 @@ class RunningNormalizer:
         x = x.astype(np.float64, copy=False).reshape(-1, *self.shape)
         if x.shape[0] == 0:
             return
+        if not np.isfinite(x).all():
+            row, *dim = (int(i) for i in np.argwhere(~np.isfinite(x))[0])
+            where = dim[0] if len(dim) == 1 else tuple(dim)
+            raise ValueError(f"normaliser update: non-finite observation (row {row} of {x.shape[0]}, dimension {where}: "
+                             f"{x[(row, *dim)]}); statistics left unchanged")  # fmt: skip
         batch_count = float(x.shape[0])
         batch_mean = x.mean(axis=0)
         batch_var = x.var(axis=0)
@@ -111,6 +119,8 @@ class RunningNormalizer:
         mean = np.asarray(_to_numpy(state["mean"]), dtype=np.float64).reshape(self.shape)
         var = np.asarray(_to_numpy(state["var"]), dtype=np.float64).reshape(self.shape)
         count = float(np.asarray(_to_numpy(state["count"])))
+        if not (math.isfinite(count) and np.isfinite(mean).all() and np.isfinite(var).all()):
+            raise ValueError("normaliser statistics must be finite (mean, var and count hold NaN or inf)")
         if count < 0 or np.any(var < 0):
             raise ValueError("count and var must be non-negative")
         self.mean, self.var, self.count = mean.copy(), var.copy(), count

@@ -26,7 +26,7 @@ def default_library_root() -> Path:
 
 
 def shipped_library_root() -> Path:
-    """The small pretrained skills that come with hrlp (trained by ``scripts/train_shipped_skills.sh``)."""
+    """The small pretrained skills that come with hrlp (their recipes: the ``shipped-skills`` preset)."""
     return Path(__file__).parent / "pretrained"
 
 
@@ -54,6 +54,23 @@ def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     return kept, {"task": task, "source": meta}
 
 
+def _param_spec(where: Path, manifest: dict[str, Any]) -> ParamSpec:
+    """The skill's parameter specification: the one declared in code for its task (:data:`PARAM_SPECS`); the manifest's
+    copy must agree on the layout (dimension, where it enters the observation), so a skill file cannot redefine it."""
+    task = manifest.get("task")
+    if task not in PARAM_SPECS:
+        raise CheckpointError(f"{where}: skill of unknown task {task!r} (known: {', '.join(PARAM_SPECS)})")
+    spec = PARAM_SPECS[task]
+    try:
+        recorded = ParamSpec.from_json(manifest["param"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise CheckpointError(f"{where}: manifest's 'param' is malformed ({e})") from None
+    if (recorded.dim, recorded.obs_start) != (spec.dim, spec.obs_start):
+        raise CheckpointError(f"{where}: manifest's parameters (dim {recorded.dim} at {recorded.obs_start}) do not match "
+                              f"task {task}'s (dim {spec.dim} at {spec.obs_start})")  # fmt: skip
+    return spec
+
+
 class SkillLibrary:
     """Named skills in a directory: ``add`` from a finished run, ``load`` frozen, ``list`` and ``manifest``."""
 
@@ -66,8 +83,13 @@ class SkillLibrary:
             return []
         return sorted(p.name for p in self.root.iterdir() if (p / "meta.json").is_file() and not p.name.startswith("."))
 
-    def add(self, run_dir: Path, name: str, k: int = 15, overwrite: bool = False) -> Path:
-        """Turn a finished training run into the named skill with default duration ``k``; returns its directory."""
+    def add(
+        self, run_dir: Path, name: str, k: int = 15, overwrite: bool = False, lineage: dict[str, Any] | None = None
+    ) -> Path:
+        """Turn a finished training run into the named skill with default duration ``k``; returns its directory.
+
+        ``lineage`` (JSON), if given, is recorded in the manifest: where the skill came from (``hrlp dagger`` records
+        the parent skill and its sha256, the Manager whose hand-over states it was retrained from, and the round)."""
         if not _NAME.match(name):
             raise ValueError(f"skill name {name!r}: use letters, digits, '_', '-', '.' (at most 64 characters)")
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
@@ -89,6 +111,8 @@ class SkillLibrary:
             "normalizer": src["normalizer"],
             "trained": {"config": src["config"], "iteration": src["iteration"], "env_steps": src["env_steps"]},
         }
+        if lineage is not None:
+            manifest["lineage"] = lineage
         return save_checkpoint(target, tensors, manifest)
 
     def manifest(self, name: str) -> dict[str, Any]:
@@ -111,7 +135,7 @@ class SkillLibrary:
         tensors, m = load_checkpoint(self.root / name)
         if m.get("kind") != "skill":
             raise CheckpointError(f"{self.root / name}: not a skill (kind {m.get('kind')!r})")
-        param = ParamSpec.from_json(m["param"])
+        param = _param_spec(self.root / name, m)
         policy = GaussianPolicy(int(m["obs_dim"]), int(m["act_dim"]), tuple(m["hidden"]))
         load_module("policy", policy, tensors)
         norm = RunningNormalizer.from_config(

@@ -21,7 +21,7 @@ from hrlp.atomic import atomic_path
 from hrlp.envs import make
 from hrlp.skills.skill import Skill
 
-#: The Gripper task arguments of the shipped Gripper skill's training starts (scripts/train_shipped_skills.sh).
+#: The Gripper task arguments of the shipped Gripper skill's training starts (the `shipped-skills` preset).
 GRIP_START_TASK_ARGS: dict[str, object] = {"start_distance": (0.0, 0.09), "finger_opening": (0.0, 1.0)}
 
 
