@@ -72,6 +72,11 @@ TASKS: dict[str, TaskSpec] = {
             lambda **kw: ReacherTask(variant="stabilised", **kw),
         ),
         TaskSpec("Reacher3D", "hand to a goal anywhere in the reachable space", lambda **kw: ReacherTask(variant="3d", **kw)),
+        TaskSpec(
+            "ReacherHandover",
+            "Reacher to a pre-grasp point above the capsule, leaving the capsule in place and the claw open",
+            lambda **kw: ReacherTask(variant="handover", **kw),
+        ),
         TaskSpec("Gripper", "grip the capsule, palm starting near it (Figure 6 reward)", _grip(GripperTask)),
         TaskSpec("MoverPlain", "move the capsule to a target, small start set", lambda **kw: MoverTask(variant="plain", **kw)),
         TaskSpec(

@@ -209,7 +209,18 @@ def _nonneg(obj: object, *names: str) -> None:
 
 # --- Reacher ----------------------------------------------------------------------------------
 
-REACHER_VARIANTS = ("normal", "stabilised", "3d")
+REACHER_VARIANTS = ("normal", "stabilised", "3d", "handover")
+
+
+#: The handover Reacher's goals: the capsule's centre plus an offset in this box (metres; never inside the capsule).
+HANDOVER_GOAL_LOW, HANDOVER_GOAL_HIGH = np.array([-0.05, -0.05, 0.04]), np.array([0.05, 0.05, 0.20])
+
+
+def claw_closure(physics: ArmPhysics) -> float:
+    """How far the claw is from open and symmetric, radians: the closing part of each finger joint (rc_close > 0,
+    lc_close < 0) plus their asymmetry |rc_close + lc_close|; 0 for any symmetric opening."""
+    rc, lc = float(physics.qpos[N_JOINTS - 2]), float(physics.qpos[N_JOINTS - 1])
+    return max(rc, 0.0) + max(-lc, 0.0) + abs(rc + lc)
 
 
 @dataclass
@@ -227,6 +238,12 @@ class ReacherTask(Task):
       - 3d: the goal is the hand position of a random collision-free arm pose with the hand
         at least 5 cm above the table, so it is reachable by construction; the capsule lies on
         the circle at a random angle.
+      - handover: a Reacher that leaves a state the Gripper can take over. The goal is a pre-grasp
+        point, never inside the capsule: its centre plus an offset in the hand-over box (x, y within
+        5 cm, z 4-20 cm above, :data:`HANDOVER_GOAL_LOW`/``HIGH``). Two more reward terms:
+        -capsule_coeff * d(C, C_0) (moving the capsule from where it lay costs) and -claw_coeff *
+        (closure + asymmetry of the two finger joints) (the claw arrives open and symmetric). Success
+        also needs the capsule within 1 cm of where it lay.
     The arm starts in a random collision-free pose. Success: d(H, goal) < success_tol.
     """
 
@@ -236,19 +253,27 @@ class ReacherTask(Task):
     """Weight of the forearm-level term (stabilised variant only)."""
     success_tol: float = 0.03
     """A step succeeds when d(H, goal) is below this, metres."""
+    capsule_coeff: float = 5.0
+    """Weight of d(C, C_0), the capsule's displacement from where it lay (handover variant only)."""
+    claw_coeff: float = 0.1
+    """Weight of the claw's closure and asymmetry, radians (handover variant only)."""
     goal: np.ndarray = field(default_factory=lambda: np.zeros(3), init=False, compare=False, repr=False)
     """The current episode's goal (episode state, set by ``reset``). [3]"""
+    start_capsule: np.ndarray = field(default_factory=lambda: np.zeros(3), init=False, compare=False, repr=False)
+    """Where the capsule lay at the episode's start (episode state). [3]"""
     extra_obs_dim = 3
 
     def __post_init__(self) -> None:
         if self.variant not in REACHER_VARIANTS:
             raise ValueError(f"ReacherTask.variant must be one of {REACHER_VARIANTS}, got {self.variant!r}")
-        _nonneg(self, "level_coeff")
+        _nonneg(self, "level_coeff", "capsule_coeff", "claw_coeff")
         _positive(self, "success_tol")
 
     @property
     def name(self) -> str:
-        return {"normal": "Reacher", "stabilised": "ReacherStabilised", "3d": "Reacher3D"}[self.variant]
+        return {"normal": "Reacher", "stabilised": "ReacherStabilised", "3d": "Reacher3D", "handover": "ReacherHandover"}[
+            self.variant
+        ]
 
     def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
         _hide_target(physics)
@@ -256,28 +281,37 @@ class ReacherTask(Task):
         if self.variant == "3d":
             random_arm(physics, rng, min_hand_z=0.05)
             self.goal[:] = physics.hand
+        elif self.variant == "handover":
+            self.goal[:] = c + rng.uniform(HANDOVER_GOAL_LOW, HANDOVER_GOAL_HIGH)
         else:
             self.goal[:] = c + np.array([0.0, 0.0, rng.uniform(0.0, 0.06)])
         random_arm(physics, rng)
+        self.start_capsule[:] = physics.capsule
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
         h, g = physics.hand, self.goal
         terms = {"distance": -math.dist(h, g)}
         if self.variant == "stabilised":
             terms["level"] = -self.level_coeff * abs(float(physics.forearm_axis[2]))
+        elif self.variant == "handover":
+            terms["capsule"] = -self.capsule_coeff * math.dist(physics.capsule, self.start_capsule)
+            terms["claw"] = -self.claw_coeff * claw_closure(physics)
         return terms
 
     def success(self, physics: ArmPhysics) -> bool:
-        return math.dist(physics.hand, self.goal) < self.success_tol
+        reached = math.dist(physics.hand, self.goal) < self.success_tol
+        return reached and (self.variant != "handover" or math.dist(physics.capsule, self.start_capsule) < 0.01)
 
     def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
         out[:] = self.goal
 
     def episode_state(self) -> dict[str, np.ndarray]:
-        return {"goal": self.goal.copy()}
+        return {"goal": self.goal.copy(), "start_capsule": self.start_capsule.copy()}
 
     def set_episode_state(self, state: dict[str, np.ndarray]) -> None:
         self.goal[:] = state["goal"]
+        if "start_capsule" in state:  # states saved before the handover variant lack it
+            self.start_capsule[:] = state["start_capsule"]
 
 
 # --- Gripper and reach-and-grip -----------------------------------------------------------------

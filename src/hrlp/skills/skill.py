@@ -77,12 +77,13 @@ PARAM_SPECS: dict[str, ParamSpec] = {
     "Reacher": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
     "ReacherStabilised": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
     "Reacher3D": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
+    "ReacherHandover": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
     "MoverPlain": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _TARGET),
     "MoverNoised": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _TARGET),
     "Gripper": ParamSpec(0, (), (), "none: grips the capsule nearest the claw"),
 }
 #: Tasks whose skills bring the hand to a point (their parameter is the point H must reach).
-POINT_TASKS = frozenset({"Reacher", "ReacherStabilised", "Reacher3D"})
+POINT_TASKS = frozenset({"Reacher", "ReacherStabilised", "Reacher3D", "ReacherHandover"})
 #: The hand-over parameterisation of a point skill: the Manager's goal is an offset from the capsule, at most 5 cm
 #: aside and 0-20 cm above its centre: where a grip starts (docs/skills.md, "Skills that hand over").
 HANDOVER_POINT = ParamSpec(3, (-0.05, -0.05, 0.0), (0.05, 0.05, 0.20), "offset of the hand's goal from the capsule's "
