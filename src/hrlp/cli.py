@@ -262,9 +262,9 @@ def train_manager(
         bool,
         typer.Option(
             help="Drive Reachers for hand-over: goals relative to the capsule, approach from above, claw held "
-            "open (docs/skills.md); off: the paper's absolute goals, skills run as trained."
+            "open (docs/skills.md); --no-handover: the paper's absolute goals, skills run as trained."
         ),
-    ] = False,
+    ] = True,
     steps: _STEPS = None,
     seed: _SEED = 0,
     run_dir: _RUN_DIR = None,

@@ -14,7 +14,7 @@ from hrlp.atomic import LOCK_FILE, DirectoryLockedError, directory_lock
 from hrlp.checkpoint import checkpoint_exists, load_checkpoint, save_checkpoint
 from hrlp.cli import app
 from hrlp.experiments.runner import Job, run_job
-from hrlp.skills.macro_env import MacroSpec, MicroAction
+from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 from hrlp.train import TrainConfig, plan_steps, train
 
 FLAT = ["--batch-steps", "16", "--num-envs", "4", "--episode-steps", "20"]
@@ -184,7 +184,11 @@ def test_flat_and_manager_commands_refuse_to_resume_each_others_runs(tmp_path):
                "3", "--steps", "48")  # fmt: skip
     assert r.exit_code == 0, r.output
     assert TrainConfig.from_json(load_checkpoint(manager / "checkpoint")[1]["config"]).macro == MacroSpec(
-        (), None, MicroAction(duration=3)
+        (),
+        None,
+        MicroAction(duration=3),
+        None,
+        Handover(),  # train-manager drives point skills for hand-over by default
     )
 
 

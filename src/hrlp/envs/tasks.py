@@ -240,7 +240,8 @@ class ReacherTask(Task):
         the circle at a random angle.
       - handover: a Reacher that leaves a state the Gripper can take over. The goal is a pre-grasp
         point, never inside the capsule: its centre plus an offset in the hand-over box (x, y within
-        5 cm, z 4-20 cm above, :data:`HANDOVER_GOAL_LOW`/``HIGH``). Two more reward terms:
+        5 cm, z 4-20 cm above, :data:`HANDOVER_GOAL_LOW`/``HIGH``), redrawn where the hand cannot reach
+        it (high points behind the arm). Two more reward terms:
         -capsule_coeff * d(C, C_0) (moving the capsule from where it lay costs) and -claw_coeff *
         (closure + asymmetry of the two finger joints) (the claw arrives open and symmetric). Success
         also needs the capsule within 1 cm of where it lay.
@@ -282,7 +283,12 @@ class ReacherTask(Task):
             random_arm(physics, rng, min_hand_z=0.05)
             self.goal[:] = physics.hand
         elif self.variant == "handover":
-            self.goal[:] = c + rng.uniform(HANDOVER_GOAL_LOW, HANDOVER_GOAL_HIGH)
+            for _ in range(50):  # goals the hand cannot reach (high ones behind the arm) are redrawn
+                self.goal[:] = c + rng.uniform(HANDOVER_GOAL_LOW, HANDOVER_GOAL_HIGH)
+                if is_reachable(physics, self.goal, rng, tries=8):
+                    break
+            else:
+                raise StartError(f"no reachable pre-grasp goal above the capsule at {np.round(c, 3).tolist()}")
         else:
             self.goal[:] = c + np.array([0.0, 0.0, rng.uniform(0.0, 0.06)])
         random_arm(physics, rng)
