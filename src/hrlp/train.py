@@ -150,7 +150,8 @@ class _MacroFactory:
         if self._skills is None:
             self._skills = self.macro.load_skills()
             check_skill_hashes(self.hashes, {s.name: s.content_hash for s in self._skills}, Path("skill library"))
-        return MacroEnv(make(self.name, **self.kwargs), self._skills, self.macro.k, self.macro.micro, self.gamma)
+        return MacroEnv(make(self.name, **self.kwargs), self._skills, self.macro.k, self.macro.micro, self.gamma,
+                        self.macro.handover)
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_skills": None}

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 from hrlp.algos.trpo import TRPOConfig
-from hrlp.skills.macro_env import MacroSpec, MicroAction
+from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 from hrlp.train import TrainConfig
 
 #: The shipped Gripper skill's start set and training settings (scripts/train_shipped_skills.sh).
@@ -80,6 +80,14 @@ def _tuned_manager(skills: tuple[str, ...], micro: bool) -> TrainConfig:
 def _experiment_1(c2: float, tr: float) -> TrainConfig:
     """reach-and-grip Experiment 1 at one cell of Figure 6: a Manager over gripper + reacher, k = 10."""
     return _manager("ReachAndGrip1", ("gripper", "reacher"), 10, task_kwargs={"c2": c2, "tr": tr})
+
+
+def _handover(config: TrainConfig) -> TrainConfig:
+    """A Manager's config with its point skills driven for hand-over (:class:`~hrlp.skills.macro_env.Handover`: goals
+    relative to the capsule, approach from above, claw held open) and its parameters' initial std e^-1 of their box's
+    half-width, so that its first goals fall near the capsule."""
+    assert config.macro is not None
+    return replace(config, macro=replace(config.macro, handover=Handover()), init_log_std=-1.0)
 
 
 def _kl(max_kl: float) -> TRPOConfig:
@@ -235,6 +243,34 @@ PRESETS: dict[str, Preset] = {
             "Section 4.3.1, Figure 6",
             tuple(Run(f"gripper+reacher,c2={c2},tr={tr}", _tuned(_experiment_1(c2, tr)), _FIG6[(c2, tr)]) for c2, tr in _GRID),
             budget=3_000_000,
+        ),
+        Preset(
+            "reach-and-grip-1-handover",
+            "Figure 6's grid (Experiment 1, gripper + reacher, k = 10, c2 x tr) at the headline's Manager settings, the "
+            "Reacher driven for hand-over (capsule-relative goals, approach from above, claw held open)",
+            "Section 4.3.1, Figure 6",
+            tuple(
+                Run(f"gripper+reacher,c2={c2},tr={tr}", _handover(_tuned(_experiment_1(c2, tr))), _FIG6[(c2, tr)])
+                for c2, tr in _GRID
+            ),
+            budget=1_000_000,
+        ),
+        Preset(
+            "reach-and-grip-2-handover",
+            "Figure 7's grid (Experiment 2, k = 15) for the skill sets with a Reacher, at the headline's Manager "
+            "settings, the Reacher driven for hand-over (capsule-relative goals, approach from above, claw held open)",
+            "Section 4.3.1, Figure 7",
+            tuple(
+                Run(
+                    f"{label},c2={c2},tr={tr}",
+                    _handover(replace(_tuned_manager(*_FIG7_SKILLS[label]), task_kwargs={"c2": c2, "tr": tr})),
+                    paper,
+                )
+                for label, cells in _FIG7.items()
+                if label != "gripper+micro"
+                for (c2, tr), paper in cells.items()
+            ),
+            budget=2_000_000,
         ),
         Preset(
             "reach-and-grip-2",

@@ -115,7 +115,16 @@ def sweep_x(preset: str, config: dict[str, Any]) -> float | None:
 # --- grids: presets whose runs are ROW,COLUMN cells of one of the paper's figures (Figure 7) ------------------------
 
 #: Presets laid out as the paper's Figures 6 and 7: run ``SKILLS,c2=X,tr=Y`` is row SKILLS, column ``c2=X,tr=Y``.
-GRIDS = frozenset({"reach-and-grip-1", "reach-and-grip-1-tuned", "reach-and-grip-2", "reach-and-grip-2-tuned"})
+GRIDS = frozenset(
+    {
+        "reach-and-grip-1",
+        "reach-and-grip-1-tuned",
+        "reach-and-grip-1-handover",
+        "reach-and-grip-2",
+        "reach-and-grip-2-tuned",
+        "reach-and-grip-2-handover",
+    }
+)
 
 
 def grid_lines(cells: dict[str, tuple[str, float | None]]) -> list[str]:

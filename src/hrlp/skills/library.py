@@ -54,6 +54,23 @@ def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     return kept, {"task": task, "source": meta}
 
 
+def _param_spec(where: Path, manifest: dict[str, Any]) -> ParamSpec:
+    """The skill's parameter specification: the one declared in code for its task (:data:`PARAM_SPECS`); the manifest's
+    copy must agree on the layout (dimension, where it enters the observation), so a skill file cannot redefine it."""
+    task = manifest.get("task")
+    if task not in PARAM_SPECS:
+        raise CheckpointError(f"{where}: skill of unknown task {task!r} (known: {', '.join(PARAM_SPECS)})")
+    spec = PARAM_SPECS[task]
+    try:
+        recorded = ParamSpec.from_json(manifest["param"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise CheckpointError(f"{where}: manifest's 'param' is malformed ({e})") from None
+    if (recorded.dim, recorded.obs_start) != (spec.dim, spec.obs_start):
+        raise CheckpointError(f"{where}: manifest's parameters (dim {recorded.dim} at {recorded.obs_start}) do not match "
+                              f"task {task}'s (dim {spec.dim} at {spec.obs_start})")  # fmt: skip
+    return spec
+
+
 class SkillLibrary:
     """Named skills in a directory: ``add`` from a finished run, ``load`` frozen, ``list`` and ``manifest``."""
 
@@ -111,7 +128,7 @@ class SkillLibrary:
         tensors, m = load_checkpoint(self.root / name)
         if m.get("kind") != "skill":
             raise CheckpointError(f"{self.root / name}: not a skill (kind {m.get('kind')!r})")
-        param = ParamSpec.from_json(m["param"])
+        param = _param_spec(self.root / name, m)
         policy = GaussianPolicy(int(m["obs_dim"]), int(m["act_dim"]), tuple(m["hidden"]))
         load_module("policy", policy, tensors)
         norm = RunningNormalizer.from_config(

@@ -30,7 +30,9 @@ import numpy as np
 
 from hrlp.envs.arm_env import ArmEnv
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
-from hrlp.skills.skill import Skill
+from hrlp.skills.skill import HANDOVER_POINT, POINT_TASKS, Skill
+
+_HAND_XY = slice(18, 20)  # the hand H's x, y in the base observation
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,38 @@ class MicroAction:
             raise ValueError(f"MicroAction.penalty must be >= 0, got {self.penalty!r}")
         if not (0 < self.max_torque <= 1):
             raise ValueError(f"MicroAction.max_torque must be in (0, 1], got {self.max_torque!r}")
+
+
+@dataclass(frozen=True)
+class Handover:
+    """How a point skill (a Reacher) is driven so that the next skill can take over from where it stops.
+
+    The paper's interface (``MacroSpec.handover = None``) passes the Reacher an absolute point anywhere in the
+    workspace and runs it as trained. A Reacher trained on -d(H, goal) alone leaves the claw closed or skewed and
+    pushes through the capsule; these three changes make the state it leaves one the Gripper grips from
+    (docs/skills.md, "Skills that hand over").
+    """
+
+    relative: bool = True
+    """The Manager's goal is an offset from the capsule's centre in :data:`~hrlp.skills.skill.HANDOVER_POINT`'s box
+    (5 cm aside, 0-20 cm above), taken at the macro-action's start, instead of a point of the whole workspace."""
+    approach_height: float = 0.11
+    """Metres the goal is raised until the hand is above it (within ``approach_radius`` horizontally), so the hand
+    comes down onto the capsule from above instead of pushing through it from the side; 0 goes straight."""
+    approach_radius: float = 0.02
+    """Horizontal distance from the goal, metres, at which the hand counts as above it (then the goal drops)."""
+    open_torque: float = 0.2
+    """While a point skill runs, its two finger torques are replaced by this torque opening the claw (rc_close < 0,
+    lc_close > 0; ARM_CLAW facts): a weak push that keeps the claw open without sweeping the capsule; 0 leaves the
+    skill's own finger torques."""
+
+    def __post_init__(self) -> None:
+        for name in ("open_torque", "approach_height", "approach_radius"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not (0 <= v <= 1):
+                raise ValueError(f"Handover.{name} must be a number in [0, 1], got {v!r}")
+        if self.approach_height > 0 and self.approach_radius <= 0:
+            raise ValueError("Handover.approach_radius must be positive when approach_height is")
 
 
 @dataclass(frozen=True)
@@ -86,7 +120,7 @@ class MacroEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"]}  # noqa: RUF012 (Gymnasium's convention)
 
     def __init__(self, env: ArmEnv, skills: Sequence[Skill], k: int | None = None, micro: MicroAction | None = None,
-                 gamma: float = 0.99) -> None:  # fmt: skip
+                 gamma: float = 0.99, handover: Handover | None = None) -> None:  # fmt: skip
         if not skills and micro is None:
             raise ValueError("MacroEnv needs at least one skill or the micro-action")
         if k is not None and (isinstance(k, bool) or not isinstance(k, int) or k < 1):
@@ -94,10 +128,16 @@ class MacroEnv(gym.Env):
         if not (0 < gamma <= 1):
             raise ValueError(f"gamma must be in (0, 1], got {gamma!r}")
         self.env, self.skills, self.micro, self.gamma = env, list(skills), micro, float(gamma)
+        self.handover = handover
         self.durations = np.array([k or s.k for s in self.skills] + ([micro.duration] if micro else []), dtype=np.int64)
         self.names = [s.name for s in self.skills] + (["micro"] if micro else [])
-        low = [np.asarray(s.param.low, dtype=np.float64) for s in self.skills]
-        high = [np.asarray(s.param.high, dtype=np.float64) for s in self.skills]
+        self.points = [s.task in POINT_TASKS for s in self.skills]
+        #: What the Manager's block of each skill means: the skill's own specification, or with ``handover.relative``
+        #: the capsule-relative box for point skills.
+        self.param_specs = [HANDOVER_POINT if handover and handover.relative and pt else s.param
+                            for s, pt in zip(self.skills, self.points, strict=True)]  # fmt: skip
+        low = [np.asarray(p.low, dtype=np.float64) for p in self.param_specs]
+        high = [np.asarray(p.high, dtype=np.float64) for p in self.param_specs]
         if micro:
             low.append(np.full(N_JOINTS, -micro.max_torque))
             high.append(np.full(N_JOINTS, micro.max_torque))
@@ -113,16 +153,24 @@ class MacroEnv(gym.Env):
         self.on_substep: Callable[[str], None] | None = None
         self._obs = np.zeros(env.observation_space.shape)
 
-    def parameters(self, choice: int, block: np.ndarray) -> np.ndarray:
-        """The chosen macro-action's parameters in its own units (metres, torques) from its block in [-1, 1]."""
+    def parameters(self, choice: int, block: np.ndarray, obs: np.ndarray | None = None) -> np.ndarray:
+        """The chosen macro-action's parameters in its own units (metres in the world frame, torques) from its block in
+        [-1, 1], in state ``obs`` (default: the current one; it matters for parameters relative to a body)."""
         lo, hi = self.offsets[choice], self.offsets[choice + 1]
-        return self._centre[lo:hi] + self._half[lo:hi] * np.clip(block, -1.0, 1.0)
+        local = self._centre[lo:hi] + self._half[lo:hi] * np.clip(block, -1.0, 1.0)
+        return local + self._origin(choice, obs)
 
-    def block(self, choice: int, params: np.ndarray) -> np.ndarray:
+    def block(self, choice: int, params: np.ndarray, obs: np.ndarray | None = None) -> np.ndarray:
         """Inverse of :meth:`parameters`: the block in [-1, 1] that passes ``params`` to macro-action ``choice``."""
         lo, hi = self.offsets[choice], self.offsets[choice + 1]
         half = np.where(self._half[lo:hi] > 0, self._half[lo:hi], 1.0)
-        return (np.asarray(params, dtype=np.float64) - self._centre[lo:hi]) / half
+        return (np.asarray(params, dtype=np.float64) - self._origin(choice, obs) - self._centre[lo:hi]) / half
+
+    def _origin(self, choice: int, obs: np.ndarray | None) -> np.ndarray:
+        if choice >= len(self.skills):
+            return np.zeros(int(self.param_dims[choice]))
+        state = self._obs if obs is None else np.asarray(obs, dtype=np.float64)
+        return self.param_specs[choice].origin(state.reshape(1, -1))[0]
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         """Reset the low-level task."""
@@ -199,6 +247,11 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     params = first._centre + first._half * np.clip(a[:, 1:], -1.0, 1.0)
     durations = first.durations[choice]
     obs = np.stack([e._obs for e in envs])
+    for s, spec in enumerate(first.param_specs):  # parameters relative to a body: add its position at the start
+        params[:, first.offsets[s] : first.offsets[s + 1]] += spec.origin(obs)
+    handover = first.handover
+    approach = handover is not None and handover.approach_height > 0
+    lifted = np.ones(n, dtype=bool)  # the goal is still raised (until the hand is above it)
     rewards, task_reward = np.zeros(n), np.zeros(n)
     discount, tau = np.ones(n), np.zeros(n, dtype=np.int64)
     terminated, truncated = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
@@ -215,7 +268,18 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
         for s in np.unique(chosen):
             idx = running[chosen == s]
             block = params[idx, offsets[s] : offsets[s + 1]]
-            torques[idx] = block if s == n_skills else first.skills[s].act(obs[idx, :BASE_OBS_DIM], block)
+            if s == n_skills:
+                torques[idx] = block
+                continue
+            point = handover is not None and first.points[s]
+            if point and approach:
+                assert handover is not None
+                off = np.linalg.norm(obs[idx, _HAND_XY] - block[:, :2], axis=1)
+                lifted[idx] &= off >= handover.approach_radius
+                block = block + np.outer(lifted[idx], (0.0, 0.0, handover.approach_height))
+            torques[idx] = first.skills[s].act(obs[idx, :BASE_OBS_DIM], block)
+            if point and handover.open_torque > 0:  # type: ignore[union-attr]
+                torques[idx, N_JOINTS - 2 :] = (-handover.open_torque, handover.open_torque)  # type: ignore[union-attr]
         for i in running:
             env = envs[i]
             obs[i], r, term, trunc, infos[i] = env.env.step(torques[i])
@@ -247,6 +311,8 @@ class MacroSpec:
     """The micro-action, or None."""
     library: str | None = None
     """A skill library directory searched first."""
+    handover: Handover | None = None
+    """How point skills hand over (:class:`Handover`); None runs them as the paper does (absolute goals, as trained)."""
 
     def __post_init__(self) -> None:
         if not self.skills and self.micro is None:
@@ -271,5 +337,6 @@ class MacroSpec:
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> MacroSpec:
         """Inverse of :meth:`to_json`."""
-        micro = d.get("micro")
-        return cls(tuple(d["skills"]), d.get("k"), MicroAction(**micro) if micro else None, d.get("library"))
+        micro, handover = d.get("micro"), d.get("handover")
+        return cls(tuple(d["skills"]), d.get("k"), MicroAction(**micro) if micro else None, d.get("library"),
+                   Handover(**handover) if handover else None)  # fmt: skip

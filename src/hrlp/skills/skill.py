@@ -17,27 +17,44 @@ from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
 
+#: Named frames a parameter vector can be expressed in: the slice of the 24-number base observation that holds the
+#: frame's origin (None for the world frame). A parameter in a body's frame is an offset from that body's position.
+FRAMES: dict[str, slice | None] = {"world": None, "hand": slice(18, 21), "capsule": slice(21, 24)}
+
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """What a skill's parameter vector is and where it enters the skill's observation."""
+    """What a skill's parameter vector is, in which frame, and where it enters the skill's observation."""
 
     dim: int
     """Number of parameters (0 for a parameterless skill such as the Gripper)."""
     low: tuple[float, ...]
-    """Lower bounds, one per parameter."""
+    """Lower bounds, one per parameter, in ``frame``."""
     high: tuple[float, ...]
-    """Upper bounds, one per parameter."""
+    """Upper bounds, one per parameter, in ``frame``."""
     meaning: str
     """What the parameters mean, e.g. 'goal position of the hand H (x, y, z), metres'."""
     obs_start: int = BASE_OBS_DIM
     """Index of the skill's observation where the parameters start (they follow the 24 base numbers)."""
+    frame: str = "world"
+    """The frame of the bounds (a key of :data:`FRAMES`): 'world', or a body ('capsule', 'hand') whose position at
+    the start of the macro-action is added to the parameters before they reach the skill."""
 
     def __post_init__(self) -> None:
         if self.dim < 0 or len(self.low) != self.dim or len(self.high) != self.dim:
             raise ValueError(f"ParamSpec: dim {self.dim} does not match bounds {self.low}, {self.high}")
-        if any(lo > hi for lo, hi in zip(self.low, self.high, strict=True)):
+        if any(not (lo <= hi) for lo, hi in zip(self.low, self.high, strict=True)):
             raise ValueError(f"ParamSpec: low {self.low} exceeds high {self.high}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"ParamSpec: unknown frame {self.frame!r} (known: {', '.join(FRAMES)})")
+        if self.frame != "world" and self.dim != 3:
+            raise ValueError(f"ParamSpec: a parameter in the {self.frame} frame is a 3-d point, got dim {self.dim}")
+
+    def origin(self, base_obs: np.ndarray) -> np.ndarray:
+        """The frame's origin in world coordinates for each state: ``[N, >=24] -> [N, dim]`` (zeros for 'world')."""
+        base = np.asarray(base_obs, dtype=np.float64)
+        where = FRAMES[self.frame]
+        return np.zeros((base.shape[0], self.dim)) if where is None else base[:, where].copy()
 
     def to_json(self) -> dict[str, Any]:
         """JSON-serialisable form."""
@@ -46,14 +63,16 @@ class ParamSpec:
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> ParamSpec:
         """Inverse of :meth:`to_json`."""
-        return cls(int(d["dim"]), tuple(d["low"]), tuple(d["high"]), str(d["meaning"]), int(d["obs_start"]))
+        return cls(int(d["dim"]), tuple(d["low"]), tuple(d["high"]), str(d["meaning"]), int(d["obs_start"]),
+                   str(d.get("frame", "world")))  # fmt: skip
 
 
-# The reachable band above the table (docs/environments.md): the Manager's parameter box for 3-d points.
+# The reachable band above the table (docs/environments.md): the skills' own box for 3-d points, in the world frame.
 _WORKSPACE_LOW, _WORKSPACE_HIGH = (-0.55, -0.45, 0.0), (0.25, 0.45, 0.45)
 _POINT = "position of the hand H to reach (x, y, z), metres"
 _TARGET = "target position T of the capsule (x, y, z), metres"
-#: Parameter specifications of the skills trained on each task (the task decides the observation layout).
+#: Parameter specifications of the skills trained on each task, declared here once (the task decides the observation
+#: layout and the meaning; a skill file's manifest records a copy, which loading checks but never uses).
 PARAM_SPECS: dict[str, ParamSpec] = {
     "Reacher": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
     "ReacherStabilised": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _POINT),
@@ -62,6 +81,12 @@ PARAM_SPECS: dict[str, ParamSpec] = {
     "MoverNoised": ParamSpec(3, _WORKSPACE_LOW, _WORKSPACE_HIGH, _TARGET),
     "Gripper": ParamSpec(0, (), (), "none: grips the capsule nearest the claw"),
 }
+#: Tasks whose skills bring the hand to a point (their parameter is the point H must reach).
+POINT_TASKS = frozenset({"Reacher", "ReacherStabilised", "Reacher3D"})
+#: The hand-over parameterisation of a point skill: the Manager's goal is an offset from the capsule, at most 5 cm
+#: aside and 0-20 cm above its centre: where a grip starts (docs/skills.md, "Skills that hand over").
+HANDOVER_POINT = ParamSpec(3, (-0.05, -0.05, 0.0), (0.05, 0.05, 0.20), "offset of the hand's goal from the capsule's "
+                           "centre C (x, y, z), metres", frame="capsule")  # fmt: skip
 
 
 class Skill:

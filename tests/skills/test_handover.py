@@ -1,0 +1,134 @@
+"""Skills that hand over: capsule-relative goals, the approach from above, the open claw, parameters declared in code."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hrlp.checkpoint import CheckpointError
+from hrlp.envs import make
+from hrlp.skills import PARAM_SPECS, ParamSpec, SkillLibrary, load_skill
+from hrlp.skills.macro_env import Handover, MacroEnv, MacroSpec, MicroAction, step_macros
+from hrlp.skills.skill import HANDOVER_POINT
+
+H, C = slice(18, 21), slice(21, 24)
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return [load_skill("gripper"), load_skill("reacher")]
+
+
+def _twin(seed: int):
+    env = make("ReachAndGrip2", episode_steps=60)
+    obs, _ = env.reset(seed=seed)
+    return env, obs
+
+
+def test_relative_goals_are_offsets_from_the_capsule_at_the_macro_start(shipped):
+    macro = MacroEnv(make("ReachAndGrip2", episode_steps=60), shipped, k=6,
+                     handover=Handover(approach_height=0.0, open_torque=0.0))  # fmt: skip
+    obs, _ = macro.reset(seed=4)
+    assert macro.param_specs[1] == HANDOVER_POINT and macro.param_specs[0] == shipped[0].param
+    offset = np.array([0.02, -0.01, 0.05])
+    block = (offset - (np.array(HANDOVER_POINT.low) + HANDOVER_POINT.high) / 2) / (
+        (np.array(HANDOVER_POINT.high) - HANDOVER_POINT.low) / 2
+    )
+    goal = obs[C] + offset
+    assert macro.parameters(1, block) == pytest.approx(goal) and macro.block(1, goal) == pytest.approx(block)
+    macro.step((1, np.zeros(0), block))
+    low, low_obs = _twin(4)
+    for _ in range(6):  # the capsule moves under the Reacher, the goal stays where it was at the macro's start
+        low_obs, *_ = low.step(shipped[1].act(low_obs[None, :24], goal[None])[0])
+    np.testing.assert_allclose(macro.env.physics.hand, low.physics.hand)
+
+
+def test_the_goal_is_raised_until_the_hand_is_above_it_and_the_claw_is_held_open(shipped):
+    h = Handover(relative=False, approach_height=0.11, approach_radius=0.02, open_torque=0.3)
+    macro = MacroEnv(make("ReachAndGrip2", episode_steps=60), shipped, k=5, handover=h)
+    obs, _ = macro.reset(seed=1)
+    far = obs[C] + (0.0, 0.0, 0.03)  # the hand starts on the palm circle, far from above the capsule
+    assert np.linalg.norm(obs[H][:2] - far[:2]) > 0.02
+    macro.step((1, np.zeros(0), macro.block(1, far)))
+    low, low_obs = _twin(1)
+    for _ in range(5):
+        a = shipped[1].act(low_obs[None, :24], np.add(far, (0.0, 0.0, 0.11))[None])[0]
+        a[7:] = (-0.3, 0.3)
+        low_obs, *_ = low.step(a)
+    np.testing.assert_allclose(macro.env.physics.hand, low.physics.hand)
+    # Right above the goal the goal is not raised.
+    obs = macro._obs
+    above = np.concatenate([obs[H][:2], [obs[H][2] - 0.04]])
+    macro.step((1, np.zeros(0), macro.block(1, above)))
+    for _ in range(5):
+        a = shipped[1].act(low_obs[None, :24], above[None])[0]
+        a[7:] = (-0.3, 0.3)
+        low_obs, *_ = low.step(a)
+    np.testing.assert_allclose(macro.env.physics.hand, low.physics.hand)
+
+
+def test_handover_leaves_other_macro_actions_alone(shipped):
+    h = Handover()
+    a = MacroEnv(make("ReachAndGrip1", episode_steps=40), shipped, k=5, micro=MicroAction(), handover=h)
+    b = MacroEnv(make("ReachAndGrip1", episode_steps=40), shipped, k=5, micro=MicroAction())
+    for env in (a, b):
+        env.reset(seed=2)
+        env.step((0, np.zeros(0), np.zeros(3), np.zeros(9)))  # the Gripper
+        env.step((2, np.zeros(0), np.zeros(3), np.full(9, 0.3)))  # the micro-action
+    np.testing.assert_array_equal(a.env.physics.hand, b.env.physics.hand)
+
+
+def _scripted_success(skills, handover, episodes=48, reach_calls=8):
+    """Reach for 4 cm above the capsule for ``reach_calls`` macro-actions, then grip: the plan a Manager has to find."""
+    envs = [MacroEnv(make("ReachAndGrip1"), skills, k=10, handover=handover) for _ in range(episodes)]
+    for i, e in enumerate(envs):
+        e.reset(seed=i)
+    success, done = np.zeros(episodes, dtype=bool), np.zeros(episodes, dtype=bool)
+    for t in range(30):
+        rows = [np.concatenate([[1 if t < reach_calls else 0], e.block(1, e._obs[C] + (0, 0, 0.04))]) for e in envs]
+        res = step_macros(envs, np.clip(np.array(rows), -1, 1))
+        success |= ~done & np.array([bool(i.get("success")) for i in res.infos])
+        done |= res.terminated | res.truncated
+    return success.mean()
+
+
+def test_the_shipped_reacher_hands_over_to_the_gripper_only_through_the_handover_interface(shipped):
+    paper, handover = _scripted_success(shipped, None), _scripted_success(shipped, Handover())
+    assert paper < 0.25 and handover > 0.6, (paper, handover)
+
+
+def test_parameters_are_declared_in_code_and_manifests_cannot_redefine_them(tmp_path):
+    lib = SkillLibrary(tmp_path)
+    import shutil
+
+    from hrlp.skills.library import shipped_library_root
+
+    shutil.copytree(shipped_library_root() / "reacher", tmp_path / "r")
+    meta_path = tmp_path / "r" / "meta.json"
+    raw = json.loads(meta_path.read_text())
+    raw["meta"]["param"]["low"], raw["meta"]["param"]["high"] = [-9, -9, -9], [9, 9, 9]  # an edited copy is ignored
+    meta_path.write_text(json.dumps(raw))
+    assert lib.load("r").param == PARAM_SPECS["Reacher"]
+    raw["meta"]["param"].update(dim=2, low=[0, 0], high=[1, 1])
+    meta_path.write_text(json.dumps(raw))
+    with pytest.raises(CheckpointError, match="do not match task Reacher"):
+        lib.load("r")
+
+
+def test_bad_frames_and_handover_settings_are_refused():
+    with pytest.raises(ValueError, match="unknown frame 'table'"):
+        ParamSpec(3, (0, 0, 0), (1, 1, 1), "x", frame="table")
+    with pytest.raises(ValueError, match="3-d point"):
+        ParamSpec(2, (0, 0), (1, 1), "x", frame="capsule")
+    for bad in ({"open_torque": 2.0}, {"approach_height": -0.1}, {"approach_radius": True}):
+        with pytest.raises(ValueError, match="Handover"):
+            Handover(**bad)
+    with pytest.raises(ValueError, match="approach_radius must be positive"):
+        Handover(approach_radius=0.0)
+
+
+def test_macro_spec_round_trips_the_handover_and_reads_configs_without_it():
+    spec = MacroSpec(("gripper", "reacher"), k=10, handover=Handover(open_torque=0.1))
+    assert MacroSpec.from_json(json.loads(json.dumps(spec.to_json()))) == spec
+    old = {"skills": ["gripper", "reacher"], "k": 10, "micro": None, "library": None}  # a config from before handover
+    assert MacroSpec.from_json(old).handover is None
