@@ -72,7 +72,7 @@ def render(
 @app.command()
 def demo(
     out_dir: Annotated[Path, typer.Option(help="Run directory (run again to continue it).")] = Path("runs/demo"),
-    steps: Annotated[int, typer.Option(help="Low-level environment steps of Manager training.")] = 3_000_000,
+    steps: Annotated[int, typer.Option(help="Low-level environment steps of Manager training.")] = 1_000_000,
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
     episodes: Annotated[int, typer.Option(help="Evaluation episodes for the success rate.")] = 100,
     video_steps: Annotated[int, typer.Option(help="Low-level steps in the video (default: one episode).")] = 0,

@@ -1,4 +1,4 @@
-"""``hrlp demo``: a Manager learns reach-and-grip (Experiment 2) with the shipped Gripper skill and micro-actions.
+"""``hrlp demo``: a Manager learns reach-and-grip (Experiment 1) by composing the shipped Reacher and Gripper skills.
 
 On a fresh machine it trains for a few minutes, then evaluates the sparse success rate of
 Definition 1, renders a video with the active skill on every frame, and plots the learning
@@ -13,7 +13,7 @@ from pathlib import Path
 from rich.console import Console
 
 from hrlp.algos.trpo import TRPOConfig
-from hrlp.skills.macro_env import MacroSpec, MicroAction
+from hrlp.skills.macro_env import Handover, MacroSpec
 from hrlp.train import TrainConfig
 
 
@@ -27,22 +27,24 @@ class DemoResult:
     plot: Path
 
 
-DEMO_STEPS = 3_000_000
+DEMO_STEPS = 1_000_000
 """The demo's training budget in low-level environment steps."""
 
 
 def demo_config(steps: int = DEMO_STEPS, seed: int = 0, workers: int = 2) -> TrainConfig:
-    """The demo's Manager: ReachAndGrip2, the shipped gripper (k = 15) and the micro-action (9 torques for one step),
-    2,000 decisions per iteration, max KL 0.02: Figure 7's best skill set, as the ``headline`` preset runs it,
-    sampled by ``workers`` processes (one per core on a two-core machine)."""
+    """The demo's Manager: ReachAndGrip1 (Figure 6's task), the shipped gripper and reacher (k = 10), the Reacher
+    driven for hand-over (:class:`~hrlp.skills.macro_env.Handover`), 2,000 decisions per iteration, max KL 0.02,
+    parameters' initial log std -1: the ``reach-and-grip-1-handover`` preset's default cell, sampled by ``workers``
+    processes (one per core on a two-core machine)."""
     return TrainConfig(
-        task="ReachAndGrip2",
+        task="ReachAndGrip1",
         steps=steps,
         batch_steps=2_000,
         num_envs=16,
         workers=workers,
         seed=seed,
-        macro=MacroSpec(("gripper",), k=15, micro=MicroAction()),
+        init_log_std=-1.0,
+        macro=MacroSpec(("gripper", "reacher"), k=10, handover=Handover()),
         trpo=TRPOConfig(max_kl=0.02),
     )
 
@@ -67,13 +69,13 @@ def run_demo(out_dir: Path, steps: int = DEMO_STEPS, seed: int = 0, episodes: in
         if dataclasses.replace(saved, steps=cfg.steps) != cfg:
             raise ValueError(f"{out_dir} holds a different run; choose another --out-dir")
     cfg.macro.load_skills()  # a missing shipped skill fails here, before any compute
-    train_with_progress(cfg, out_dir, resume, console, "Manager on ReachAndGrip2")
+    train_with_progress(cfg, out_dir, resume, console, "Manager on ReachAndGrip1")
     ev = evaluate_run(out_dir, episodes=episodes)
     video = out_dir / "demo.mp4"
     frames, fps, _ = rollout_frames(out_dir, steps=video_steps, seed=seed, console=console)
     write_video(video, frames, fps)
-    plot = plot_learning_curves({"Manager (gripper + micro)": [out_dir]}, out_dir / "learning_curve.png",
-                                title="reach-and-grip, Experiment 2")  # fmt: skip
+    plot = plot_learning_curves({"Manager (gripper + reacher)": [out_dir]}, out_dir / "learning_curve.png",
+                                title="reach-and-grip, Experiment 1")  # fmt: skip
     usage = ", ".join(f"{k} {v:.0%}" for k, v in (ev.macro_usage or {}).items())
     console.print(f"success rate over {episodes} evaluation episodes (95% Wilson CI): {ev.success}; decisions: {usage}")
     return DemoResult(out_dir, str(ev.success), video, plot)
