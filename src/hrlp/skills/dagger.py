@@ -206,7 +206,7 @@ def run_round(cfg: DaggerConfig, out_dir: Path, console: Any = None) -> dict[str
         assert ev.success is not None
         return {"mean": ev.success.mean, "low": ev.success.low, "high": ev.success.high, "decisions": ev.macro_usage}
 
-    parent_run = _parent_as_run(parent_manifest, bank, out_dir / "parent-eval", parent_dir)
+    parent_run = _parent_as_run(scfg, out_dir / "parent-eval")
     result = {
         "round_dir": str(out_dir),
         "manager_run": str(manager_run),
@@ -244,16 +244,16 @@ def _finished(run_dir: Path, steps: int) -> bool:
     return checkpoint_exists(run_dir / "checkpoint") and int(load_checkpoint(run_dir / "checkpoint")[1]["env_steps"]) >= steps
 
 
-def _parent_as_run(parent_manifest: dict[str, Any], bank: Path, run_dir: Path, parent_dir: Path) -> Path:
-    """A run directory holding the parent skill unchanged (a zero-step warm start), so that it is evaluated exactly
-    as the retrained one is: same task, same starts, same evaluation code."""
+def _parent_as_run(retrain: Any, run_dir: Path) -> Path:
+    """A run directory holding the parent skill unchanged: the retraining run's config (``retrain``, warm-started from
+    the parent) saved before its first iteration, so that the parent is evaluated exactly as the retrained skill is
+    (same task, same starts, same evaluation code)."""
     from hrlp.checkpoint import checkpoint_exists
     from hrlp.train import Trainer
 
     if checkpoint_exists(run_dir / "checkpoint"):
         return run_dir
-    cfg = skill_config(parent_manifest, bank.resolve(), DaggerConfig("-", "-", "--", workers=1), str(parent_dir.resolve()))
-    trainer = Trainer(dataclasses.replace(cfg, workers=1))
+    trainer = Trainer(dataclasses.replace(retrain, workers=1))
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
         trainer.save(run_dir / "checkpoint")
