@@ -132,6 +132,8 @@ class MacroEnv(gym.Env):
         self.durations = np.array([k or s.k for s in self.skills] + ([micro.duration] if micro else []), dtype=np.int64)
         self.names = [s.name for s in self.skills] + (["micro"] if micro else [])
         self.points = [s.task in POINT_TASKS for s in self.skills]
+        #: How each skill is driven: the hand-over settings for point skills, None for skills run as trained.
+        self.drives = [handover if pt else None for pt in self.points]
         #: What the Manager's block of each skill means: the skill's own specification, or with ``handover.relative``
         #: the capsule-relative box for point skills.
         self.param_specs = [HANDOVER_POINT if handover and handover.relative and pt else s.param
@@ -248,9 +250,8 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     durations = first.durations[choice]
     obs = np.stack([e._obs for e in envs])
     for s, spec in enumerate(first.param_specs):  # parameters relative to a body: add its position at the start
-        params[:, first.offsets[s] : first.offsets[s + 1]] += spec.origin(obs)
-    handover = first.handover
-    approach = handover is not None and handover.approach_height > 0
+        if spec.frame != "world":
+            params[:, first.offsets[s] : first.offsets[s + 1]] += spec.origin(obs)
     lifted = np.ones(n, dtype=bool)  # the goal is still raised (until the hand is above it)
     rewards, task_reward = np.zeros(n), np.zeros(n)
     discount, tau = np.ones(n), np.zeros(n, dtype=np.int64)
@@ -271,15 +272,14 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
             if s == n_skills:
                 torques[idx] = block
                 continue
-            point = handover is not None and first.points[s]
-            if point and approach:
-                assert handover is not None
+            h = first.drives[s]
+            if h is not None and h.approach_height > 0:
                 off = np.linalg.norm(obs[idx, _HAND_XY] - block[:, :2], axis=1)
-                lifted[idx] &= off >= handover.approach_radius
-                block = block + np.outer(lifted[idx], (0.0, 0.0, handover.approach_height))
+                lifted[idx] &= off >= h.approach_radius
+                block = block + np.outer(lifted[idx], (0.0, 0.0, h.approach_height))
             torques[idx] = first.skills[s].act(obs[idx, :BASE_OBS_DIM], block)
-            if point and handover.open_torque > 0:  # type: ignore[union-attr]
-                torques[idx, N_JOINTS - 2 :] = (-handover.open_torque, handover.open_torque)  # type: ignore[union-attr]
+            if h is not None and h.open_torque > 0:
+                torques[idx, N_JOINTS - 2 :] = (-h.open_torque, h.open_torque)
         for i in running:
             env = envs[i]
             obs[i], r, term, trunc, infos[i] = env.env.step(torques[i])
