@@ -137,3 +137,21 @@ def test_gravity_can_be_switched_off():
     for _ in range(20):
         p.step(np.zeros(9))
     np.testing.assert_allclose(p.capsule, [0.0, 0.35, 0.2], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("offset", "yaw", "expected"),
+    [
+        ((0.05, 0.0, 0.02), 0.0, 0.025),  # beyond the axis' end (3.5 cm): measured to the end point, (1.5, 0, 2) cm
+        ((0.01, 0.03, 0.0), 0.0, 0.03),  # beside the axis: only the perpendicular 3 cm count
+        ((0.01, 0.03, 0.0), math.pi / 2, 0.01),  # the axis along y runs through the hand's y: 1 cm in x remains
+        ((0.0, 0.0, 0.0), 1.0, 0.0),  # on the centre
+    ],
+)
+def test_hand_to_capsule_axis_is_the_distance_to_the_capsules_core_segment(physics, offset, yaw, expected):
+    physics.forward()
+    h = physics.hand.copy()
+    physics.set_capsule(h + np.array(offset), yaw=yaw)
+    physics.forward()
+    assert physics.hand_to_capsule_axis() == pytest.approx(expected, abs=1e-9)
+    assert physics.hand_to_capsule() == pytest.approx(float(np.linalg.norm(offset)), abs=1e-9)

@@ -260,3 +260,17 @@ def test_reach_and_grip_starts_never_fail_when_palm_and_capsule_angles_meet():
         env.reset(seed=i)
         for _ in range(170):
             env.reset()
+
+
+def test_grip_reward_measures_the_distance_to_the_centre_or_to_the_axis():
+    env = make("Gripper", distance="axis")
+    assert env.task.reward == GripReward(distance="axis")
+    p = env.physics
+    p.forward()
+    p.set_capsule(p.hand + np.array([0.0, 0.02, 0.0]) + np.array([0.03, 0.0, 0.0]), yaw=0.0)  # 3 cm along the axis, 2 cm off
+    p.forward()
+    centre, axis = GripReward(tr=0.025).terms(p), GripReward(tr=0.025, distance="axis").terms(p)
+    assert centre["distance"] == pytest.approx(-p.hand_to_capsule()) and centre["bonus"] == 0.0  # d(H, C) = 3.6 cm
+    assert axis["distance"] == pytest.approx(-0.02) and axis["bonus"] == 3.0  # 2 cm from the axis: inside tr
+    with pytest.raises(ValueError, match="distance must be one of centre, axis"):
+        GripReward(distance="surface")

@@ -133,6 +133,8 @@ class ArmPhysics:
         self._hand_v = d.site_xpos[self._hand]
         self._tip_v = (d.site_xpos[self._tips[0]], d.site_xpos[self._tips[1]])
         self._capsule_v = d.xpos[self._obj_body]
+        self._capsule_axis_v = d.geom_xmat[self._object_geom]  # row-major 3 x 3: the axis is entries 2, 5, 8
+        self._capsule_half_length = float(m.geom_size[self._object_geom, 1])
         self._target_v = d.mocap_pos[self._target_mocap]
         mujoco.mj_forward(m, self.data)
 
@@ -180,6 +182,19 @@ class ArmPhysics:
     def hand_to_capsule(self) -> float:
         """d(H, C), metres."""
         return _dist(self.hand, self.capsule)
+
+    def hand_to_capsule_axis(self) -> float:
+        """d(H, capsule axis): distance from H to the nearest point of the capsule's axis segment, metres.
+
+        The axis is the capsule's core segment (half-length ``model.geom_size[object, 1]``, 3.5 cm either side of C);
+        a claw that holds the capsule off its centre, which centred grips rarely avoid on a 12 cm capsule, has H
+        near the axis but up to 4 cm from C."""
+        c, h = self._capsule_v, self._hand_v
+        ax = self._capsule_axis_v  # unit vector: column 2 of the capsule geom's rotation (MuJoCo capsules lie along z)
+        s = (h[0] - c[0]) * ax[2] + (h[1] - c[1]) * ax[5] + (h[2] - c[2]) * ax[8]
+        s = min(max(s, -self._capsule_half_length), self._capsule_half_length)
+        x, y, z = h[0] - c[0] - s * ax[2], h[1] - c[1] - s * ax[5], h[2] - c[2] - s * ax[8]
+        return math.sqrt(x * x + y * y + z * z)
 
     def capsule_to_target(self) -> float:
         """d(C, T), metres."""

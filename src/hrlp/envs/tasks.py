@@ -323,6 +323,10 @@ class ReacherTask(Task):
 # --- Gripper and reach-and-grip -----------------------------------------------------------------
 
 
+#: What :class:`GripReward` may measure as d(H, C): the capsule's centre (the paper) or its axis segment.
+GRIP_DISTANCES = ("centre", "axis")
+
+
 @dataclass(frozen=True)
 class GripReward:
     """The Gripper's reward (Section 4.1, Experiment 1): c1 d(H,C) + c2 1[d(H,C) < tr] + c3 d(FT1,FT2).
@@ -332,6 +336,14 @@ class GripReward:
     and c3 = -4 (Section 4.3.2).
     An optional fourth term, ``c4 1[Definition 1 holds now]`` (c4 >= 0, default 0: the paper's
     reward), pays for the gripped state itself; the shipped Gripper skill trains with it.
+
+    ``distance`` chooses what d(H, C) measures in the first two terms: ``"centre"`` (the paper: the
+    distance to the capsule's centre of mass) or ``"axis"`` (the distance to the capsule's axis segment,
+    :meth:`~hrlp.envs.physics.ArmPhysics.hand_to_capsule_axis`). A claw holds the 12 cm capsule wherever
+    it closes along it: with the shipped Gripper, H is a median 3.2 cm from C but 1.1 cm from the axis
+    while gripped, so under ``"centre"`` at tr = 0.03 a grip rarely earns the bonus and hovering over the
+    centre with an open claw pays more; under ``"axis"`` gripping pays most. Definition 1 (the success
+    test) is unchanged.
     """
 
     c1: float = -1.0
@@ -344,6 +356,8 @@ class GripReward:
     """Distance threshold of the bonus, metres."""
     c4: float = 0.0
     """Bonus while the sparse-success condition holds (0: the paper's three-term reward)."""
+    distance: str = "centre"
+    """What d(H, C) measures: ``"centre"`` (the capsule's centre, the paper) or ``"axis"`` (its axis segment)."""
 
     def __post_init__(self) -> None:
         for n in ("c1", "c2", "c3", "tr", "c4"):
@@ -354,10 +368,12 @@ class GripReward:
             raise ValueError(f"grip reward needs c1, c3 < 0 < c2, got c1={self.c1}, c2={self.c2}, c3={self.c3}")
         _positive(self, "tr")
         _nonneg(self, "c4")
+        if self.distance not in GRIP_DISTANCES:
+            raise ValueError(f"grip reward distance must be one of {', '.join(GRIP_DISTANCES)}, got {self.distance!r}")
 
     def terms(self, physics: ArmPhysics) -> dict[str, float]:
         """The three terms for the current state."""
-        d = physics.hand_to_capsule()
+        d = physics.hand_to_capsule() if self.distance == "centre" else physics.hand_to_capsule_axis()
         return {
             "distance": self.c1 * d,
             "bonus": self.c2 if d < self.tr else 0.0,
