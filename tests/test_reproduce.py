@@ -71,7 +71,16 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
             assert r.paper == (fig6 if "-1-" in name else fig7)[r.name]
     assert len(PRESETS["reach-and-grip-2-handover"].runs) == 12
     assert all(r.config.macro is None or r.config.macro.handover is None
-               for p in PRESETS.values() if "handover" not in p.name for r in p.runs)  # fmt: skip
+               for p in PRESETS.values() if "handover" not in p.name and p.name != "reach-and-grip-1-samples"
+               for r in p.runs)  # fmt: skip
+    # The samples preset's Manager is Figure 6's hand-over cell exactly (its runs can be shared); its flat run has the
+    # paper's settings on the same task and reward.
+    samples, fig6_handover = PRESETS["reach-and-grip-1-samples"], PRESETS["reach-and-grip-1-handover"]
+    manager, flat = samples.runs
+    cell = next(r for r in fig6_handover.runs if r.name == "gripper+reacher,c2=3,tr=0.03")
+    assert samples.config(manager, 1) == fig6_handover.config(cell, 1) and manager.paper == cell.paper
+    assert flat.config.macro is None and (flat.config.task, flat.config.task_kwargs) == ("ReachAndGrip1", {"c2": 3, "tr": 0.03})
+    assert (flat.config.batch_steps, flat.config.trpo.max_kl, samples.config(flat, 0).steps) == (50_000, 0.01, 3_000_000)
     # Each tuned Appendix C sweep changes one setting of one cell of the tuned grid, and includes that cell itself.
     for name, base, setting in (
         ("manager-kl-tuned", "gripper+s-reacher", lambda c: c.trpo.max_kl),

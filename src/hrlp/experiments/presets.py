@@ -288,6 +288,18 @@ PRESETS: dict[str, Preset] = {
             budget=1_000_000,
         ),
         Preset(
+            "reach-and-grip-1-samples",
+            "Samples to success on Figure 6's c2 3, tr 0.03 cell (Experiment 1): the hand-over Manager over gripper + "
+            "reacher (as in reach-and-grip-1-handover, 1M steps) against flat TRPO with the paper's settings (3M steps)",
+            "Sections 4.3.1-4.3.2 ('up to 10x fewer samples')",
+            (
+                Run("manager:gripper+reacher", _handover(_tuned(_experiment_1(3, 0.03))), _FIG6[(3, 0.03)],
+                    steps=1_000_000),  # fmt: skip
+                Run("flat", _flat("ReachAndGrip1", task_kwargs={"c2": 3, "tr": 0.03})),
+            ),
+            budget=3_000_000,
+        ),
+        Preset(
             "reach-and-grip-2-handover",
             "Figure 7's grid (Experiment 2, k = 15) for the skill sets with a Reacher, at the headline's Manager "
             "settings, the Reacher driven for hand-over (capsule-relative goals, approach from above, claw held open)",
