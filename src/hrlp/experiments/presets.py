@@ -293,8 +293,7 @@ PRESETS: dict[str, Preset] = {
             "reacher (as in reach-and-grip-1-handover, 1M steps) against flat TRPO with the paper's settings (3M steps)",
             "Sections 4.3.1-4.3.2 ('up to 10x fewer samples')",
             (
-                Run("manager:gripper+reacher", _handover(_tuned(_experiment_1(3, 0.03))), _FIG6[(3, 0.03)],
-                    steps=1_000_000),  # fmt: skip
+                Run("manager:gripper+reacher", _handover(_tuned(_experiment_1(3, 0.03))), _FIG6[(3, 0.03)], steps=1_000_000),
                 Run("flat", _flat("ReachAndGrip1", task_kwargs={"c2": 3, "tr": 0.03})),
             ),
             budget=3_000_000,
