@@ -274,3 +274,26 @@ def test_grip_reward_measures_the_distance_to_the_centre_or_to_the_axis():
     assert axis["distance"] == pytest.approx(-0.02) and axis["bonus"] == 3.0  # 2 cm from the axis: inside tr
     with pytest.raises(ValueError, match="distance must be one of centre, axis"):
         GripReward(distance="surface")
+
+
+def test_gripper_push_term_charges_knocking_the_capsule_away_not_holding_it():
+    env = make("Gripper", push_coeff=10.0)
+    env.reset(seed=0)
+    p, task = env.physics, env.task
+    assert "push" in task.reward_terms(p) and task.reward_terms(p)["push"] == 0.0  # where it lay
+    c0 = task.start_capsule.copy()
+    p.set_capsule(c0 + np.array([0.03, -0.04, 0.0]))  # knocked 5 cm across the table
+    p.forward()
+    assert not task.sparse(p) and task.reward_terms(p)["push"] == pytest.approx(-0.5)
+    state = env.get_state()
+    env.reset(seed=1)
+    env.set_state(state)
+    assert np.array_equal(env.task.start_capsule, c0)  # the episode's start travels with the state (exact resume)
+    held = make("Gripper", push_coeff=10.0, tr1=1.0, tr2=1.0)  # thresholds so wide that Definition 1 always holds
+    held.reset(seed=0)
+    held.physics.set_capsule(held.task.start_capsule + np.array([0.03, -0.04, 0.0]))
+    held.physics.forward()
+    assert held.task.reward_terms(held.physics)["push"] == 0.0
+    assert "push" not in make("Gripper").task.reward_terms(make("Gripper").physics)  # default: the paper's terms
+    with pytest.raises(ValueError, match="push_coeff"):
+        make("Gripper", push_coeff=-1.0)

@@ -441,9 +441,15 @@ class GripperTask(Task):
     """Range of the start distance d(H, C), metres."""
     finger_opening: tuple[float, float] = (0.0, 0.0)
     """Range of each finger's start opening, radians (at most 1.05, the joint limit)."""
+    push_coeff: float = 0.0
+    """Weight of a fourth reward term, -push_coeff * the capsule's horizontal displacement from where it lay at the
+    episode's start, paid while Definition 1 does not hold: knocking the capsule away costs, lifting it in the claw
+    does not (0: the paper's reward)."""
+    start_capsule: np.ndarray = field(default_factory=lambda: np.zeros(3), init=False, compare=False, repr=False)
+    """Where the capsule lay at the episode's start (episode state). [3]"""
 
     def __post_init__(self) -> None:
-        _nonneg(self, "angle_range")
+        _nonneg(self, "angle_range", "push_coeff")
         for name, top in (("start_distance", 0.3), ("finger_opening", 1.05)):
             v = tuple(getattr(self, name))
             if (
@@ -465,13 +471,27 @@ class GripperTask(Task):
             i = int(rng.integers(len(qpos)))
             physics.set_state_vectors(qpos[i], qvel[i])
             physics.forward()
-            return
-        c = _place_capsule(physics, _angle(rng, self.angle_range))
-        (d0, d1), (f0, f1) = self.start_distance, self.finger_opening
-        arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, d0, d1), fingers=lambda: rng.uniform(f0, f1), tries=200)
+        else:
+            c = _place_capsule(physics, _angle(rng, self.angle_range))
+            (d0, d1), (f0, f1) = self.start_distance, self.finger_opening
+            arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, d0, d1), fingers=lambda: rng.uniform(f0, f1),
+                             tries=200)  # fmt: skip
+        self.start_capsule[:] = physics.capsule
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
-        return _grip_terms(self.reward, self.sparse, physics)
+        terms = _grip_terms(self.reward, self.sparse, physics)
+        if self.push_coeff:
+            c, c0 = physics.capsule, self.start_capsule
+            held = self.sparse(physics)
+            terms["push"] = 0.0 if held else -self.push_coeff * math.hypot(c[0] - c0[0], c[1] - c0[1])
+        return terms
+
+    def episode_state(self) -> dict[str, np.ndarray]:
+        return {"start_capsule": self.start_capsule.copy()}
+
+    def set_episode_state(self, state: dict[str, np.ndarray]) -> None:
+        if "start_capsule" in state:  # states saved before the push term lack it
+            self.start_capsule[:] = state["start_capsule"]
 
     def success(self, physics: ArmPhysics) -> bool:
         return self.sparse(physics)
