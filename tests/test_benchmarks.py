@@ -9,6 +9,7 @@ import pytest
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 CASES = {  # script: (arguments, a line its output must contain)
+    "gripper_diagnosis.py": ("--episodes 2 --steps 30", "failed episodes"),
     "env_step.py": ("--steps 200 --repeats 1 --tasks Reacher,Gripper", "median env/physics time ratio"),
     "stability.py": ("--steps 200 --tasks Reacher", "unstable episodes"),
     "manager_speed.py": ("--rounds 1 --flat-batch 400 --manager-batch 40 --workers 1", "Manager / flat: sampling"),
