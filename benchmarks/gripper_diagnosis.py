@@ -7,6 +7,7 @@ Prints, for the skill (default: the shipped ``gripper``) on ``Gripper`` with the
   d(H, C) there against d(H, capsule axis) (``GripReward(distance="axis")``);
 - the reward per step the paper's terms pay in gripped, lifted states (capsule centre above 3 cm) under
   ``distance="centre"`` and ``"axis"``;
+- success by the start distance d(H, C);
 - the failed episodes by kind: capsule pushed more than 3 cm across the table, hand never within 5 cm, claw closed
   beside the capsule.
 
@@ -42,7 +43,7 @@ def main() -> None:
     episodes = []
     for ep in range(args.episodes):
         obs, _ = env.reset(seed=ep)
-        c0 = p.capsule.copy()
+        c0, d0 = p.capsule.copy(), p.hand_to_capsule()
         first, min_d = -1, np.inf
         info: dict = {}
         for t in range(args.steps):
@@ -60,7 +61,7 @@ def main() -> None:
             if trunc:
                 break
         pushed = float(np.hypot(*(p.capsule[:2] - c0[:2])))
-        episodes.append((bool(info["success"]), first, pushed, min_d))
+        episodes.append((bool(info["success"]), first, pushed, min_d, d0))
     ok = np.array([e[0] for e in episodes])
     firsts = np.array([e[1] for e in episodes if e[0]])
     print(
@@ -83,6 +84,11 @@ def main() -> None:
             f"gripped and lifted: {len(r)} states; the paper's reward per step {r[:, 0].mean():.2f} (distance to the "
             f"centre), {r[:, 1].mean():.2f} (distance to the axis)"
         )
+    starts = np.array([e[4] for e in episodes])
+    bins = [(lo, hi) for lo, hi in ((0.0, 0.03), (0.03, 0.06), (0.06, 0.3)) if ((starts >= lo) & (starts < hi)).any()]
+    print("success by start distance d(H, C): " + ", ".join(
+        f"{lo * 100:.0f}-{min(hi, 0.09) * 100:.0f} cm {ok[(starts >= lo) & (starts < hi)].mean():.2f} "
+        f"({((starts >= lo) & (starts < hi)).sum()})" for lo, hi in bins))  # fmt: skip
     fails = [e for e in episodes if not e[0]]
     if fails:
         n = len(fails)
