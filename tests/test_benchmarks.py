@@ -41,3 +41,21 @@ def test_manager_vs_flat_runs_and_reuses_finished_runs(tmp_path):
     assert (tmp_path / "cmp" / "manager-s0" / "checkpoint").exists() and (tmp_path / "cmp" / "flat-s0").exists()
     again = _run("manager_vs_flat.py", args, tmp_path)
     assert again.returncode == 0 and again.stdout == first.stdout
+
+
+def test_gripper_variants_retrains_the_shipped_gripper_and_reports_both_start_sets(tmp_path):
+    from hrlp.envs import make
+    from hrlp.envs.tasks import HANDOVER_BANK
+    from hrlp.skills.starts import write_start_bank
+
+    env = make("Gripper")
+    env.reset(seed=0)
+    d = env.physics.data
+    write_start_bank(tmp_path / "bank.npz", {HANDOVER_BANK: (d.qpos[None].copy(), d.qvel[None].copy())}, {"test": "1"})
+    args = f"--bank {tmp_path / 'bank.npz'} --variant axis+push --steps 1 --episodes 1 --workers 1 --out {tmp_path / 'v'}"
+    out = _run("gripper_variants.py", args, tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "axis+push, 1 steps, from handover starts: success" in out.stdout and "from own starts" in out.stdout
+    config = __import__("json").loads((tmp_path / "v" / "skill" / "config.json").read_text())
+    assert config["task_kwargs"]["distance"] == "axis" and config["task_kwargs"]["push_coeff"] == 10.0
+    assert config["init_from"].endswith("gripper")
