@@ -18,6 +18,7 @@ CASES = {  # script: (arguments, a line its output must contain)
         "mj_step share of 1 core(s) x wall: measured in the run",
     ),
     "trpo_returns.py": ("--libs hrlp --steps 1000 --batch-steps 500 --seeds 1 --episodes 1", "hrlp"),
+    "reliability.py": ("--only physics --blow-ups 2", "forced physics blow-ups: 24 (3 kinds x 2 steps x 4 tasks"),
 }
 
 

@@ -189,6 +189,15 @@ def test_build_tables_writes_the_sweep_scatter_and_the_sample_efficiency_table(t
     assert "| steps to 25% |" in (out / "headline.md").read_text()
     with pytest.raises(ValueError, match="thresholds"):
         build_tables(root, out, thresholds=(1.5,))
+    # A preset that declares its own thresholds gets them unless the caller gives some.
+    for seed in (0, 1):
+        _write_run(root, "reach-and-grip-1-samples", "manager:gripper+reacher", seed, 1.0, [0.0, 0.3, 0.6, 0.9, 1.0, 1.0])
+    build_tables(root, out, window=1, overwrite=True)
+    samples = (out / "reach-and-grip-1-samples.md").read_text()
+    assert "| steps to 5% | steps to 20% | steps to 50% | steps to 90% |" in samples
+    assert "| steps to 5% | steps to 10% | steps to 20% |" in (out / "headline.md").read_text()
+    build_tables(root, out, thresholds=(0.25,), window=1)
+    assert "| steps to 25% |" in (out / "reach-and-grip-1-samples.md").read_text()
     with pytest.raises(ValueError, match="must end in"):
         plot_sweep([(1.0, [0.5])], out / "scatter.txt", "x", "y")
 

@@ -247,3 +247,31 @@ def test_resume_refuses_other_settings_and_fresh_runs_refuse_to_overwrite(tmp_pa
         list(train(cfg, tmp_path))
     r = CliRunner().invoke(app, ["train", "Reacher", "--run-dir", str(tmp_path / "none"), "--resume"])
     assert r.exit_code == 2 and "no checkpoint" in r.output
+
+
+def test_progress_written_to_a_file_is_a_line_per_iteration(tmp_path):
+    import io
+
+    from rich.console import Console
+
+    from hrlp.train import train_with_progress
+
+    log = io.StringIO()  # not a terminal: a progress bar would leave nothing readable here
+    summary = train_with_progress(TrainConfig(task="Reacher", **TINY), tmp_path / "run", console=Console(file=log),
+                                  description="train Reacher")  # fmt: skip
+    lines = log.getvalue().splitlines()
+    assert summary.iterations == 2 and len(lines) == 2, lines
+    assert lines[0].startswith("train Reacher: iteration 1, 200/400 steps (50%), return ")
+    assert lines[1].startswith("train Reacher: iteration 2, 400/400 steps (100%), return ")
+    assert all("success" in line and " steps/s, " in line for line in lines)
+
+
+def test_reproduce_jobs_report_a_line_per_iteration(tmp_path, capfd):
+    from hrlp.experiments.runner import Job, run_job
+
+    cfg = TrainConfig(task="Reacher", **TINY)
+    job = Job(preset="p", run="normal", seed=0, config=cfg, run_dir=tmp_path / "p" / "normal" / "s0", paper=None,
+              eval_episodes=1)  # fmt: skip
+    run_job(job)
+    err = capfd.readouterr().err.splitlines()
+    assert [line.split(",")[0] for line in err] == ["p / normal / seed 0: iteration 1", "p / normal / seed 0: iteration 2"]

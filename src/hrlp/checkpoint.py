@@ -28,6 +28,21 @@ through one directory handle, so a reader never pairs the weights of one checkpo
 A file system error while saving (full disk, read-only directory) raises :class:`hrlp.atomic.StorageError` (one line
 naming the checkpoint); the previous checkpoint stays as it was.
 
+What the content hash covers: ``sha256`` in ``meta.json`` is the digest of the bytes of ``weights.safetensors``, and of
+nothing else. It detects a truncated, damaged or swapped weights file, and it is a skill's identity (its
+``content_hash``, recorded by every Manager trained with it and by DAgger's lineage), so it must not change when only
+the JSON beside it does. ``meta.json`` is not hashed: a digest stored in the file it covers detects nothing that an
+editor could not recompute, and a truncated JSON file already fails to parse. Instead, every reader checks the keys it
+needs (``required`` in :func:`load_checkpoint`: a missing or mistyped key is a one-line :class:`CheckpointError` naming
+the file, never a ``KeyError``), and the list of tensor names in ``meta.json`` must match the weights exactly.
+
+Reading is bounded, because a checkpoint may come from someone else: both files are opened without following a
+symbolic link and without blocking (``O_NOFOLLOW | O_NONBLOCK``), must be regular files (a FIFO, a device such as
+``/dev/zero`` or a directory is refused before a byte is read), and may not exceed the sizes of :class:`ReadLimits`;
+JSON nested deeper than its ``max_json_depth``, or holding NaN, Infinity or an out-of-range number, is refused before it
+is parsed. A caller that builds something from the tensors' shapes (:mod:`hrlp.skills.library`) can check the
+safetensors header (:func:`safetensors_header`) against the meta through ``before_tensors``, before any tensor exists.
+
 Random-number generators are stored through :func:`pack_generators` / :func:`unpack_generators` (numpy bit-generator
 states in JSON, torch generator states as uint8 tensors), and modules through :func:`module_tensors` /
 :func:`load_module`::
@@ -41,13 +56,18 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import math
 import os
+import re
 import secrets
 import shutil
+import stat
+import struct
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import safetensors.torch
@@ -60,11 +80,42 @@ FORMAT_VERSION = 1
 WEIGHTS_FILE = "weights.safetensors"
 META_FILE = "meta.json"
 _RNG_KEY = "rng"
+# Opening never blocks (a FIFO), never follows a symbolic link to a file, and never leaks into child processes;
+# getattr: flags a platform lacks (Windows) are left out.
+_NO_WAIT = getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+_OPEN_DIR = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | _NO_WAIT
+_OPEN_FILE = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | _NO_WAIT
 _TORCH_RNG_PREFIX = "rng.torch."
 
 
 class CheckpointError(ValueError):
     """A checkpoint is missing, incomplete, modified, or does not match what the caller expects."""
+
+
+@dataclass(frozen=True)
+class ReadLimits:
+    """Bounds on what :func:`load_checkpoint` reads: larger or deeper files are refused before they are parsed."""
+
+    max_meta_bytes: int = 64 * 2**20
+    """Largest ``meta.json`` (a training run's holds its sampler state: about 5 KB per environment)."""
+    max_weights_bytes: int = 4 * 2**30
+    """Largest ``weights.safetensors``."""
+    max_json_depth: int = 64
+    """Deepest nesting of arrays and objects in ``meta.json`` (a training run's: 7); Python's parser would otherwise
+    raise RecursionError on a deep enough file."""
+
+
+#: Limits for any checkpoint (training runs); skills use tighter ones (:mod:`hrlp.skills.library`).
+DEFAULT_LIMITS = ReadLimits()
+
+
+class TensorInfo(NamedTuple):
+    """What the safetensors header says about one tensor, read before the tensor is built."""
+
+    dtype: str
+    """The safetensors dtype code, e.g. ``F32``, ``F64``, ``I64``."""
+    shape: tuple[int, ...]
+    """The tensor's shape."""
 
 
 # --- saving ---------------------------------------------------------------------------------------------------------
@@ -222,66 +273,217 @@ def resolve_checkpoint(directory: Path) -> Path:
     return max(complete, key=lambda p: p.stat().st_mtime_ns)
 
 
-def load_checkpoint(directory: Path) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
-    """Read and verify a checkpoint written by :func:`save_checkpoint`; returns ``(tensors, meta)``.
+class Checkpoint(NamedTuple):
+    """A checkpoint as read by :func:`read_checkpoint`."""
 
-    Verifies the format version, the sha256 of ``weights.safetensors`` and the tensor names. Any problem -- a
-    missing file, a truncated or modified file, invalid JSON, an unknown format -- raises :class:`CheckpointError`
-    with a one-line message naming the file. The weights are parsed by safetensors only (no pickle, no
-    ``torch.load``); the bytes parsed are exactly the bytes hashed.
+    tensors: dict[str, torch.Tensor]
+    """Every tensor, by name."""
+    meta: dict[str, Any]
+    """The caller's JSON dict."""
+    sha256: str
+    """Hex digest of ``weights.safetensors`` (verified): the checkpoint's content hash."""
+
+
+def load_checkpoint(
+    directory: Path,
+    *,
+    required: Mapping[str, type | tuple[type, ...]] | None = None,
+    limits: ReadLimits = DEFAULT_LIMITS,
+    before_tensors: Callable[[dict[str, Any], dict[str, TensorInfo]], None] | None = None,
+) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
+    """``(tensors, meta)`` of the checkpoint in ``directory``: :func:`read_checkpoint` without the hash."""
+    tensors, meta, _ = read_checkpoint(directory, required=required, limits=limits, before_tensors=before_tensors)
+    return tensors, meta
+
+
+def read_checkpoint(
+    directory: Path,
+    *,
+    required: Mapping[str, type | tuple[type, ...]] | None = None,
+    limits: ReadLimits = DEFAULT_LIMITS,
+    before_tensors: Callable[[dict[str, Any], dict[str, TensorInfo]], None] | None = None,
+) -> Checkpoint:
+    """Read and verify a checkpoint written by :func:`save_checkpoint`.
+
+    Verifies the format version, the sha256 of ``weights.safetensors`` and the tensor names; ``required`` maps keys the
+    caller's meta must hold to their JSON types (``int`` excludes ``bool``). Any problem -- a missing file, a file that
+    is a symbolic link, not a regular file or larger than ``limits``, a truncated or modified file, invalid or too deeply
+    nested JSON, an unknown format, a missing or mistyped required key -- raises :class:`CheckpointError` with a
+    one-line message naming the file. ``before_tensors(meta, header)``, if given, is called with the safetensors header
+    once the files are verified and before any tensor is built, so it can refuse shapes and dtypes first. The weights
+    are parsed by safetensors only (no pickle, no ``torch.load``); the bytes parsed are exactly the bytes hashed.
     """
     source = resolve_checkpoint(directory)
     meta_path, weights_path = source / META_FILE, source / WEIGHTS_FILE
     try:
-        dir_fd = os.open(source, os.O_RDONLY)
+        dir_fd = os.open(source, _OPEN_DIR)
     except OSError as error:
         raise CheckpointError(f"{source}: cannot open ({error.strerror})") from error
     try:
-        meta_bytes = _read_at(dir_fd, META_FILE, meta_path)
-        weights_bytes = _read_at(dir_fd, WEIGHTS_FILE, weights_path)
+        meta_bytes = _read_at(dir_fd, META_FILE, meta_path, limits.max_meta_bytes)
+        weights_bytes = _read_at(dir_fd, WEIGHTS_FILE, weights_path, limits.max_weights_bytes)
     finally:
         os.close(dir_fd)
 
-    document = _parse_meta(meta_bytes, meta_path)
+    document = _parse_meta(meta_bytes, meta_path, limits.max_json_depth)
+    if required:
+        require_keys(document["meta"], required, meta_path)
     digest = hashlib.sha256(weights_bytes).hexdigest()
     if digest != document["sha256"]:
         raise CheckpointError(
             f"{weights_path}: sha256 {digest[:12]}... does not match {document['sha256'][:12]}... in {META_FILE}"
             " (file truncated or modified)"
         )
+    if before_tensors is not None:
+        header = safetensors_header(weights_bytes, weights_path, limits.max_json_depth)
+        if sorted(header) == document["tensors"]:  # otherwise the check of the names below says what differs
+            before_tensors(document["meta"], header)
     try:
         tensors = safetensors.torch.load(weights_bytes)
     except (SafetensorError, ValueError, RuntimeError) as error:
-        raise CheckpointError(f"{weights_path}: not a valid safetensors file ({error})") from error
+        raise CheckpointError(f"{weights_path}: not a valid safetensors file ({_one_line(error)})") from error
     if sorted(tensors) != document["tensors"]:
         missing = sorted(set(document["tensors"]) - set(tensors))
         unexpected = sorted(set(tensors) - set(document["tensors"]))
         raise CheckpointError(
             f"{weights_path}: tensor names differ from {META_FILE} (missing {missing}, unexpected {unexpected})"
         )
-    return tensors, document["meta"]
+    return Checkpoint(tensors, document["meta"], digest)
 
 
-def _read_at(dir_fd: int, name: str, path: Path) -> bytes:
+def require_keys(meta: Mapping[str, Any], required: Mapping[str, type | tuple[type, ...]], path: Path) -> None:
+    """Raise :class:`CheckpointError` naming ``path`` unless ``meta`` holds every key of ``required`` with a value of
+    its type (``int`` and ``float`` exclude ``bool``; ``float`` accepts an ``int``)."""
+    for key, kinds in required.items():
+        if key not in meta:
+            raise CheckpointError(f"{path}: no {key!r} in its meta (needed: {', '.join(required)})")
+        if not _is_json_type(meta[key], kinds):
+            names = " or ".join(k.__name__ for k in (kinds if isinstance(kinds, tuple) else (kinds,)))
+            raise CheckpointError(f"{path}: {key!r} must be {names}, got {type(meta[key]).__name__} {_short(meta[key])}")
+
+
+def _is_json_type(value: Any, kinds: type | tuple[type, ...]) -> bool:
+    for kind in kinds if isinstance(kinds, tuple) else (kinds,):
+        if kind in (int, float) and isinstance(value, bool):
+            continue
+        if isinstance(value, kind) or (kind is float and isinstance(value, int) and not isinstance(value, bool)):
+            return True
+    return False
+
+
+def _short(value: Any, width: int = 40) -> str:
+    text = repr(value).replace("\n", " ")
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def _one_line(error: BaseException) -> str:
+    return " ".join(str(error).split())
+
+
+def safetensors_header(weights: bytes, path: Path, max_json_depth: int = 64) -> dict[str, TensorInfo]:
+    """The dtype and shape of every tensor in a safetensors file's bytes, from its header alone (8 bytes of header
+    length, then a JSON object); no tensor is built. Raises :class:`CheckpointError` naming ``path``."""
+    if len(weights) < 8:
+        raise CheckpointError(f"{path}: not a valid safetensors file ({len(weights)} bytes, no header)")
+    (size,) = struct.unpack("<Q", weights[:8])
+    if size > len(weights) - 8:
+        raise CheckpointError(f"{path}: not a valid safetensors file (header of {size} bytes in a file of {len(weights)})")
+    header = parse_json(weights[8 : 8 + size], path, max_json_depth, what="safetensors header")
+    if not isinstance(header, dict):
+        raise CheckpointError(f"{path}: not a valid safetensors file (header is not a JSON object)")
+    out: dict[str, TensorInfo] = {}
+    for name, entry in header.items():
+        if name == "__metadata__":
+            continue
+        dtype, shape = (entry.get("dtype"), entry.get("shape")) if isinstance(entry, dict) else (None, None)
+        sizes = shape if isinstance(shape, list) else [-1]
+        if not isinstance(dtype, str) or not all(_is_json_type(n, int) and n >= 0 for n in sizes):
+            raise CheckpointError(f"{path}: not a valid safetensors file (tensor {_short(name)}: no dtype and shape)")
+        out[name] = TensorInfo(dtype, tuple(shape))
+    return out
+
+
+def _read_at(dir_fd: int, name: str, path: Path, limit: int) -> bytes:
+    """The bytes of the regular file ``name`` in the directory ``dir_fd``: never through a symbolic link, never
+    blocking (a FIFO is refused, not waited on), never more than ``limit`` bytes (a device such as /dev/zero is
+    refused before a byte is read)."""
     try:
-        fd = os.open(name, os.O_RDONLY, dir_fd=dir_fd)
+        fd = os.open(name, _OPEN_FILE, dir_fd=dir_fd)
     except FileNotFoundError as error:
         raise CheckpointError(f"{path}: missing") from error
     except OSError as error:
+        if os.path.islink(path):
+            raise CheckpointError(f"{path}: a symbolic link (-> {os.readlink(path)}); a checkpoint's files must be "
+                                  "regular files") from None  # fmt: skip
         raise CheckpointError(f"{path}: cannot open ({error.strerror})") from error
-    with os.fdopen(fd, "rb") as file:
-        return file.read()
-
-
-def _parse_meta(meta_bytes: bytes, path: Path) -> dict[str, Any]:
     try:
-        document = json.loads(meta_bytes.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise CheckpointError(f"{path}: invalid JSON ({error})") from error
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise CheckpointError(f"{path}: not a regular file ({_file_kind(info.st_mode)}); refusing to read it")
+        if info.st_size > limit:
+            raise CheckpointError(f"{path}: {info.st_size:,} bytes, more than the {limit:,} a checkpoint may hold here")
+        chunks, total = [], 0
+        while chunk := os.read(fd, min(1 << 20, limit + 1 - total)):
+            chunks.append(chunk)
+            total += len(chunk)
+            if total > limit:  # the file grew while being read
+                raise CheckpointError(f"{path}: more than the {limit:,} bytes a checkpoint may hold here")
+        return b"".join(chunks)
+    except OSError as error:
+        raise CheckpointError(f"{path}: cannot read ({error.strerror})") from error
+    finally:
+        os.close(fd)
+
+
+def _file_kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISDIR, "a directory"), (stat.S_ISSOCK, "a socket")):  # fmt: skip
+        if test(mode):
+            return kind
+    return "not a plain file"
+
+
+_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"')
+
+
+def json_depth(data: bytes) -> int:
+    """The deepest nesting of arrays and objects in the JSON text ``data``, counted without parsing it."""
+    if not data:
+        return 0
+    text = np.frombuffer(_JSON_STRING.sub(b'""', data), dtype=np.uint8)
+    step = np.isin(text, (ord("["), ord("{"))).astype(np.int64) - np.isin(text, (ord("]"), ord("}")))
+    return int(np.cumsum(step).max(initial=0))
+
+
+def parse_json(data: bytes, path: Path, max_depth: int, what: str = "JSON") -> Any:
+    """Strict JSON from ``data``: UTF-8, at most ``max_depth`` levels deep, numbers finite (no NaN, Infinity, 1e999).
+    Raises :class:`CheckpointError` naming ``path``, never RecursionError."""
+    if (depth := json_depth(data)) > max_depth:
+        raise CheckpointError(f"{path}: {what} nested {depth} levels deep, more than the {max_depth} allowed")
+
+    def finite(text: str) -> float:
+        value = float(text)
+        if not math.isfinite(value):
+            raise ValueError(f"number {text[:20]} is out of range")
+        return value
+
+    def refuse(name: str) -> float:
+        raise ValueError(f"{name} is not JSON")
+
+    try:
+        return json.loads(data.decode("utf-8"), parse_float=finite, parse_constant=refuse)
+    except json.JSONDecodeError as error:
+        raise CheckpointError(f"{path}: invalid {what} ({error})") from error
+    except (UnicodeDecodeError, ValueError, RecursionError) as error:  # ValueError: a bad number, or > 4300 digits
+        raise CheckpointError(f"{path}: invalid {what} ({_one_line(error)})") from error
+
+
+def _parse_meta(meta_bytes: bytes, path: Path, max_depth: int = DEFAULT_LIMITS.max_json_depth) -> dict[str, Any]:
+    document = parse_json(meta_bytes, path, max_depth)
     if not isinstance(document, dict):
         raise CheckpointError(f"{path}: expected a JSON object, got {type(document).__name__}")
     if document.get("format") != FORMAT_VERSION:
-        raise CheckpointError(f"{path}: format {document.get('format')!r}, this reader understands {FORMAT_VERSION}")
+        raise CheckpointError(f"{path}: format {_short(document.get('format'))}, this reader understands {FORMAT_VERSION}")
     sha, names, meta = document.get("sha256"), document.get("tensors"), document.get("meta")
     if not isinstance(sha, str) or not isinstance(meta, dict):
         raise CheckpointError(f"{path}: 'sha256' must be a string and 'meta' an object")

@@ -8,14 +8,11 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 from rich.table import Table
+from typer.core import TyperGroup
 
-app = typer.Typer(
-    name="hrlp",
-    help="Hierarchical Reinforcement Learning with Parameters: tasks, skills, Managers and the paper's experiments.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
+from hrlp import bounds
+from hrlp import cli_params as check
+
 console = Console()
 err_console = Console(stderr=True, soft_wrap=True)  # one-line errors, never wrapped
 
@@ -23,6 +20,119 @@ err_console = Console(stderr=True, soft_wrap=True)  # one-line errors, never wra
 def _fail(message: str) -> typer.Exit:
     err_console.print(f"[bold red]error:[/] {message}")
     return typer.Exit(code=2)
+
+
+def _error_exit(message: str, code: int = 2) -> int:
+    """Print ``message`` as one line (``error: ...``, whitespace collapsed, never read as markup) on stderr."""
+    from rich.markup import escape
+
+    err_console.print(f"[bold red]error:[/] {escape(' '.join(message.split()))}", highlight=False)
+    return code
+
+
+#: Installable extras for optional packages a command imports.
+_EXTRAS = {
+    "ray": "pip install 'hrlp[ray]'",
+    "sb3_contrib": "pip install 'hrlp[bench]'",
+    "tianshou": "pip install 'hrlp[bench]'",
+}
+
+
+def _known_error_line(error: BaseException) -> str | None:
+    """The one line for an error a user's input or machine can cause (a bad value, a file, a missing package or
+    driver), or None for anything else (a bug in hrlp: its traceback is shown)."""
+    import sys
+
+    if isinstance(error, OSError):  # StorageError names its path in its own words
+        plain = type(error).__str__ is OSError.__str__ and error.filename and error.strerror
+        return f"{error.filename}: {error.strerror}" if plain else str(error)
+    if isinstance(error, ValueError):  # CheckpointError, NonFiniteError, every config check
+        return str(error)
+    if isinstance(error, ImportError):
+        hint = _EXTRAS.get((error.name or "").split(".")[0])
+        return f"{error}" + (f": {hint}" if hint else "")
+    gym_error = sys.modules.get("gymnasium.error")
+    if gym_error is not None and isinstance(error, gym_error.Error):
+        return str(error)
+    if isinstance(error, RuntimeError) and "MUJOCO_GL" in str(error):  # MuJoCo refuses the value at import
+        return f"{error}: use egl (a GPU or Mesa's EGL), osmesa (software) or glfw (a display), or leave MUJOCO_GL unset"
+    if "mujoco" in sys.modules or "OpenGL" in sys.modules:  # MuJoCo's OpenGL backend failed (e.g. at import)
+        from hrlp.video import gl_failure_line
+
+        return gl_failure_line(error)
+    return None
+
+
+class _OneLineErrors(TyperGroup):
+    """The ``hrlp`` group: every error a user can cause ends the command with one line ``error: ...`` on stderr and
+    exit code 2, never a traceback. Parse errors (click's usage errors, :class:`hrlp.cli_params.BoundError`) and the
+    known error types of :func:`_known_error_line` raised by any command are turned into that line here, once."""
+
+    def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
+             standalone_mode: bool = True, **extra: Any) -> Any:  # fmt: skip
+        from typer._click import exceptions as click_errors
+
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            code = rv if isinstance(rv, int) else 0  # typer.Exit(code) comes back as its code here
+        except click_errors.NoArgsIsHelpError as e:  # the help was printed
+            code = e.exit_code
+        except click_errors.UsageError as e:
+            if isinstance(e, check.BoundError):
+                message = e.message
+            else:
+                where = f"{e.ctx.command_path}: " if e.ctx is not None else ""
+                see = f" (see '{e.ctx.command_path} --help')" if e.ctx is not None else ""
+                message = f"{where}{e.format_message()}{see}"
+            code = _error_exit(message, e.exit_code)
+        except typer.Abort:
+            code = _error_exit("aborted", 1)
+        except Exception as e:
+            if (line := _known_error_line(e)) is None:
+                raise
+            code = _error_exit(line)
+        if not standalone_mode:
+            return code
+        raise SystemExit(code)
+
+
+app = typer.Typer(
+    name="hrlp",
+    help="Hierarchical Reinforcement Learning with Parameters: tasks, skills, Managers and the paper's experiments.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    cls=_OneLineErrors,
+)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from hrlp import __version__
+
+        console.print(f"hrlp {__version__}", highlight=False)
+        raise typer.Exit()
+
+
+@app.callback()
+def _hrlp(
+    version: Annotated[
+        bool, typer.Option("--version", help="Print hrlp's version and exit.", callback=_print_version, is_eager=True)
+    ] = False,
+) -> None:
+    """Hierarchical Reinforcement Learning with Parameters: tasks, skills, Managers and the paper's experiments."""
+
+
+def _given(ctx: typer.Context, name: str) -> bool:
+    """Whether the option ``name`` was given on the command line (not left at its default)."""
+    source = ctx.get_parameter_source(name)  # by the enum's name: Typer carries its own copy of click's ParameterSource
+    return source is not None and source.name not in ("DEFAULT", "DEFAULT_MAP")
+
+
+_STEPS_CHECK = check.count(1, bounds.MAX_STEPS, bounds.WHY_STEPS, "number of environment steps")
+_EPISODES_CHECK = check.count(1, bounds.MAX_EPISODES, bounds.WHY_EPISODES)
+_VIDEO_STEPS_CHECK = check.count(0, bounds.MAX_VIDEO_STEPS, bounds.WHY_VIDEO_STEPS)
+_BATCH_CHECK = check.count(None, bounds.MAX_BATCH_STEPS, bounds.WHY_BATCH_STEPS)  # 0 or less: TrainConfig says so
 
 
 @app.command()
@@ -43,51 +153,71 @@ def tasks() -> None:
 def render(
     source: Annotated[str, typer.Argument(help="A task (random policy), e.g. Gripper, or a run directory (trained policy).")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Video file to write (.mp4 or .gif).")] = Path("rollout.mp4"),
-    steps: Annotated[int, typer.Option(help="Low-level control steps to record (default: one episode).")] = 0,
-    seed: Annotated[int, typer.Option(help="Seed of the start state and the actions.")] = 0,
-    width: Annotated[int, typer.Option(help="Frame width in pixels.")] = 480,
-    height: Annotated[int, typer.Option(help="Frame height in pixels.")] = 360,
+    steps: Annotated[
+        int, typer.Option(help="Low-level control steps to record (default: one episode).", callback=_VIDEO_STEPS_CHECK)
+    ] = 0,
+    seed: Annotated[int, typer.Option(help="Seed of the start state and the actions.", callback=check.seed())] = 0,
+    width: Annotated[int, typer.Option(help="Frame width in pixels (16 to the model's 640).")] = 480,
+    height: Annotated[int, typer.Option(help="Frame height in pixels (16 to the model's 480).")] = 360,
     camera: Annotated[str, typer.Option(help="Model camera: front or side.")] = "front",
 ) -> None:
     """Record a rollout to a video file, off-screen: a task with random actions, or a trained run's policy.
 
     A Manager's video labels every frame with the active skill.
     """
-    from hrlp.checkpoint import CheckpointError
-    from hrlp.video import check_video_path, rollout_frames, write_video
+    from hrlp.video import check_rendering, check_video_path, rollout_frames, write_video
 
-    try:
-        if steps < 0 or width < 16 or height < 16:
-            raise ValueError("--steps must be >= 0 and --width/--height >= 16")
-        if camera not in ("front", "side"):
-            raise ValueError(f"--camera must be 'front' or 'side', got {camera!r}")
-        check_video_path(out)
-        frames, fps, name = rollout_frames(source, steps, seed, err_console, width=width, height=height, camera=camera)
-    except (ValueError, CheckpointError) as e:
-        raise _fail(str(e)) from None
+    if camera not in ("front", "side"):
+        raise ValueError(f"--camera must be 'front' or 'side', got {camera!r}")
+    _check_render_source(source)
+    check_video_path(out)
+    check_rendering(width, height)  # a missing OpenGL driver or an oversized frame fails now, in one line
+    frames, fps, name = rollout_frames(source, steps, seed, err_console, width=width, height=height, camera=camera)
     count = write_video(out, frames, fps=fps)
     console.print(f"wrote {out} ({count} frames, {count / fps:.1f} s) of {name}")
 
 
+def _check_render_source(source: str) -> None:
+    """Raise ValueError unless ``source`` is an hrlp task or an existing run directory, saying which it was taken for."""
+    from hrlp.envs import TASKS
+
+    if source.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
+        return
+    path = Path(source)
+    if path.is_dir():
+        return
+    if path.exists():
+        raise ValueError(f"{source} is a file, not a run directory (nor a task: run 'hrlp tasks' to list them)")
+    if "/" in source or source.startswith((".", "~")) or Path(source).parent != Path("."):
+        raise ValueError(f"{source}: no such run directory (and not a task: run 'hrlp tasks' to list them)")
+    raise ValueError(f"unknown task {source!r} and no run directory of that name; run 'hrlp tasks' to list the tasks "
+                     "(only hrlp tasks render)")  # fmt: skip
+
+
 @app.command()
 def demo(
-    out_dir: Annotated[Path, typer.Option(help="Run directory (run again to continue it).")] = Path("runs/demo"),
-    steps: Annotated[int, typer.Option(help="Low-level environment steps of Manager training.")] = 1_000_000,
-    seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
-    episodes: Annotated[int, typer.Option(help="Evaluation episodes for the success rate.")] = 100,
-    video_steps: Annotated[int, typer.Option(help="Low-level steps in the video (default: one episode).")] = 0,
-    workers: Annotated[int, typer.Option(help="Sampling processes (1: sample in this process).")] = 2,
+    out_dir: Annotated[Path, typer.Option(help="Run directory (run again to continue it).", callback=check.out_dir)] = Path(
+        "runs/demo"
+    ),
+    steps: Annotated[
+        int, typer.Option(help="Low-level environment steps of Manager training.", callback=_STEPS_CHECK)
+    ] = 1_000_000,
+    seed: Annotated[int, typer.Option(help="Seed of the run.", callback=check.seed())] = 0,
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes for the success rate.", callback=_EPISODES_CHECK)] = 100,
+    video_steps: Annotated[
+        int, typer.Option(help="Low-level steps in the video (default: one episode).", callback=_VIDEO_STEPS_CHECK)
+    ] = 0,
+    workers: Annotated[
+        int, typer.Option(help="Sampling processes (1: sample in this process).", callback=check.workers())
+    ] = 2,
 ) -> None:
     """Train a Manager on reach-and-grip with the shipped skills; print its success rate, write a video and a plot."""
-    from hrlp.checkpoint import CheckpointError
+    from hrlp.video import check_rendering
+
+    check_rendering(480, 360)  # the video comes after minutes of training: a missing OpenGL driver fails now
     from hrlp.experiments.demo import run_demo
 
-    try:
-        if steps <= 0 or episodes <= 0 or video_steps < 0 or workers < 1:
-            raise ValueError("--steps, --episodes and --workers must be positive, --video-steps at least 0")
-        res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers)
-    except (ValueError, CheckpointError) as e:
-        raise _fail(str(e)) from None
+    res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers)
     console.print(f"success rate: {res.success}")
     console.print(f"video: {res.video}\nlearning curve: {res.plot}\nrun: {res.run_dir} (hrlp eval / hrlp render work on it)")
 
@@ -107,20 +237,38 @@ def presets() -> None:
 
 @app.command()
 def reproduce(
+    ctx: typer.Context,
     preset: Annotated[str, typer.Argument(help="A preset (see 'hrlp presets'), e.g. reach-and-grip-2.")],
-    seeds: Annotated[int | None, typer.Option(help="Seeds 0..N-1 per run (default: the preset's).")] = None,
-    budget: Annotated[int | None, typer.Option(help="Environment steps per run (default: the preset's).")] = None,
-    out: Annotated[Path, typer.Option(help="Root of the runs (OUT/PRESET/RUN/sSEED).")] = Path("runs/reproduce"),
+    seeds: Annotated[
+        int | None,
+        typer.Option(help="Seeds 0..N-1 per run (default: the preset's).", callback=check.count(1, bounds.MAX_SEED)),
+    ] = None,
+    budget: Annotated[
+        int | None, typer.Option(help="Environment steps per run (default: the preset's).", callback=_STEPS_CHECK)
+    ] = None,
+    out: Annotated[Path, typer.Option(help="Root of the runs (OUT/PRESET/RUN/sSEED).", callback=check.out_dir)] = Path(
+        "runs/reproduce"
+    ),
     backend: Annotated[str, typer.Option(help="process (a local process pool) or ray (a Ray cluster).")] = "process",
-    workers: Annotated[int, typer.Option(help="Runs at once on the process pool.")] = 2,
-    address: Annotated[str | None, typer.Option(help="Ray cluster address (default: start a local Ray).")] = None,
+    workers: Annotated[int, typer.Option(help="Runs at once on the process pool.", callback=check.workers())] = 2,
+    address: Annotated[
+        str | None, typer.Option(help="Ray cluster address, HOST:PORT (default: start a local Ray); needs --backend ray.")
+    ] = None,
     reuse: Annotated[
         bool, typer.Option(help="Copy a run whose config matches a finished run of another preset under OUT.")
     ] = True,
 ) -> None:
     """Run a preset's runs x seeds grid; finished runs are skipped, interrupted ones resume, runs another preset
     already finished with the same config are copied."""
-    from hrlp.checkpoint import CheckpointError
+    if backend not in ("process", "ray"):
+        raise ValueError(f"--backend must be one of process, ray, got {backend!r}")
+    if address is not None and backend != "ray":
+        raise ValueError(f"--address {address} is a Ray cluster's; it needs --backend ray (the {backend} backend ignores it)")
+    if backend == "ray" and _given(ctx, "workers"):
+        raise ValueError("--workers sizes the local process pool; with --backend ray the cluster's CPUs decide how many "
+                         "runs go at once (leave --workers out)")  # fmt: skip
+    if address is not None and (problem := bounds.ray_address_problem(address)) is not None:
+        raise ValueError(problem)  # a dead address fails here, within seconds, not after Ray's minutes of retries
     from hrlp.experiments.runner import reproduce as run_grid
 
     def report(r: dict) -> None:
@@ -135,24 +283,30 @@ def reproduce(
         )
         err_console.print(f"{r['preset']} / {r['run']} / seed {r['seed']}: {what}, {r['env_steps']:,} steps{note}")
 
-    try:
-        results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse)
-    except (ValueError, CheckpointError, ImportError) as e:
-        raise _fail(str(e)) from None
+    results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse)
     console.print(f"{len(results)} runs of {preset} in {out / preset}; tables: hrlp tables --root {out}")
 
 
 @app.command()
 def tables(
-    root: Annotated[Path, typer.Option(help="Root of the runs written by 'hrlp reproduce'.")] = Path("runs/reproduce"),
+    root: Annotated[Path, typer.Option(help="Root of the runs written by 'hrlp reproduce'.", callback=check.out_dir)] = Path(
+        "runs/reproduce"
+    ),
     out: Annotated[
-        Path | None, typer.Option(help="Directory for the markdown tables and PNG plots (default ROOT/tables).")
+        Path | None,
+        typer.Option(help="Directory for the markdown tables and PNG plots (default ROOT/tables).", callback=check.out_dir),
     ] = None,
     threshold: Annotated[
         list[float] | None,
-        typer.Option(help="Training success rate for the sample-efficiency table; repeatable (default 0.05, 0.1, 0.2)."),
+        typer.Option(
+            help="Training success rate for the sample-efficiency table; repeatable (default: the preset's own, else "
+            "0.05, 0.1, 0.2).",
+            callback=check.real(0.0, 1.0, low_open=True),
+        ),
     ] = None,
-    window: Annotated[int, typer.Option(help="Iterations in the moving average of the training success rate.")] = 3,
+    window: Annotated[
+        int, typer.Option(help="Iterations in the moving average of the training success rate.", callback=check.count(1))
+    ] = 3,
     overwrite: Annotated[
         bool, typer.Option(help="Replace files in --out that 'hrlp tables' did not write there (e.g. committed results).")
     ] = False,
@@ -163,47 +317,74 @@ def tables(
     Files it wrote before (recorded in OUT/.hrlp-tables.json) are replaced; any other file is replaced only with
     --overwrite."""
     from hrlp.atomic import StorageError
-    from hrlp.experiments.tables import DEFAULT_THRESHOLDS, build_tables, default_out
+    from hrlp.experiments.tables import build_tables, default_out
 
     out = default_out(root) if out is None else out
     try:
-        files = build_tables(root, out, thresholds=tuple(threshold) if threshold else DEFAULT_THRESHOLDS, window=window,
+        files = build_tables(root, out, thresholds=tuple(threshold) if threshold else None, window=window,
                              overwrite=overwrite)  # fmt: skip
-    except (ValueError, StorageError) as e:
-        raise _fail(str(e)) from None
+    except StorageError:
+        raise
     except OSError as e:
-        raise _fail(_os_error_line(e, out)) from None
+        raise OSError(_os_error_line(e, out)) from None
     for f in files:
         console.print(f"wrote {f}")
 
 
 @app.command()
 def theory(
-    mdps: Annotated[int, typer.Option(help="Random MDPs to search (each with several policy pairs).")] = 200,
-    seed: Annotated[int, typer.Option(help="Seed of the search.")] = 0,
-    out: Annotated[Path, typer.Option(help="Directory for counterexample files.")] = Path("theory_counterexamples"),
+    mdps: Annotated[
+        int,
+        typer.Option(
+            help="Random MDPs to search (each with several policy pairs).",
+            callback=check.count(1, bounds.MAX_MDPS, bounds.WHY_MDPS),
+        ),
+    ] = 200,
+    seed: Annotated[int, typer.Option(help="Seed of the search.", callback=check.seed())] = 0,
+    out: Annotated[Path, typer.Option(help="Directory for counterexample files.", callback=check.out_dir)] = Path(
+        "theory_counterexamples"
+    ),
 ) -> None:
     """Check Lemma 1, Theorem 1, Lemma 2 and Corollary 1 numerically on random finite MDPs."""
     from hrlp.theory import run_theory
 
-    if mdps <= 0:
-        raise _fail(f"--mdps must be a positive integer, got {mdps}")
     run_theory(mdps=mdps, seed=seed, out_dir=out, console=console)
 
 
 _DEFAULT_STEPS = 1_000_000
-_STEPS = Annotated[int | None, typer.Option(help="Low-level environment steps in total (default 1,000,000).")]
-_SEED = Annotated[int, typer.Option(help="Seed of environments, network and action noise.")]
-_RUN_DIR = Annotated[Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).")]
-_NUM_ENVS = Annotated[int, typer.Option(help="Environments stepped together with batched inference.")]
+_STEPS = Annotated[
+    int | None, typer.Option(help="Low-level environment steps in total (default 1,000,000).", callback=_STEPS_CHECK)
+]
+_SEED = Annotated[int, typer.Option(help="Seed of environments, network and action noise.", callback=check.seed())]
+_RUN_DIR = Annotated[
+    Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).", callback=check.out_dir)
+]
+_NUM_ENVS = Annotated[
+    int,
+    typer.Option(
+        help=f"Environments stepped together with batched inference (at most {bounds.MAX_NUM_ENVS:,}).",
+        callback=check.count(1, bounds.MAX_NUM_ENVS, bounds.WHY_NUM_ENVS),
+    ),
+]
 _MAX_KL = Annotated[float, typer.Option(help="TRPO's trust region, the maximal mean KL per step.")]
 _GAMMA = Annotated[float, typer.Option(help="Discount factor (per low-level step).")]
-_EPISODE_STEPS = Annotated[int | None, typer.Option(help="Episode length of hrlp tasks (default 300).")]
+_EPISODE_STEPS = Annotated[
+    int | None,
+    typer.Option(
+        help="Episode length (hrlp tasks: default 300; a Gymnasium id: its time limit, default its own).",
+        callback=check.count(1),
+    ),
+]
 _TASK_ARG = Annotated[
     list[str] | None,
     typer.Option("--task-arg", help="A task argument NAME=VALUE, repeatable, e.g. --task-arg c1=-10 --task-arg tr=0.06."),
 ]
-_WORKERS = Annotated[int, typer.Option(help="Processes sampling at the same time (e.g. one per core); 1: in this process.")]
+_WORKERS = Annotated[
+    int,
+    typer.Option(
+        help="Processes sampling at the same time (e.g. one per core); 1: in this process.", callback=check.workers()
+    ),
+]
 _INIT_LOG_STD = Annotated[float, typer.Option(help="Initial log std of the Gaussian action noise.")]
 _VALUE_ITERS = Annotated[int, typer.Option(help="L-BFGS iterations of the baseline fit per iteration (modular_rl: 25).")]
 _VALUE_FRACTION = Annotated[
@@ -224,7 +405,9 @@ def train(
     steps: _STEPS = None,
     seed: _SEED = 0,
     run_dir: _RUN_DIR = None,
-    batch_steps: Annotated[int, typer.Option(help="Environment steps per TRPO iteration (paper: 50,000).")] = 50_000,
+    batch_steps: Annotated[
+        int, typer.Option(help="Environment steps per TRPO iteration (paper: 50,000).", callback=_BATCH_CHECK)
+    ] = 50_000,
     num_envs: _NUM_ENVS = 16,
     max_kl: _MAX_KL = 0.01,
     gamma: _GAMMA = 0.99,
@@ -238,6 +421,9 @@ def train(
     resume: _RESUME = False,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
+    if not resume:  # before torch is imported: the task, its arguments and spaces (a resume uses the run's own)
+        _check_numbers(ctx)
+        _check_task(task, episode_steps, task_arg, ctx)
     settings = dict(task=task, steps=_DEFAULT_STEPS if steps is None else steps, seed=seed, batch_steps=batch_steps,
                     num_envs=num_envs, episode_steps=episode_steps, init_log_std=init_log_std, workers=workers,
                     value_iters=value_iters, value_fraction=value_fraction)  # fmt: skip
@@ -253,11 +439,24 @@ def train_manager(
         str, typer.Option(help="Comma-separated skill names (see 'hrlp skills list'), e.g. gripper,reacher.")
     ] = "",
     micro: Annotated[bool, typer.Option(help="Add the micro-action: direct torque control.")] = False,
-    micro_duration: Annotated[int, typer.Option(help="Low-level steps a micro-action lasts.")] = 1,
-    micro_penalty: Annotated[float, typer.Option(help="Penalty per use of the micro-action.")] = 0.0,
-    micro_max_torque: Annotated[float, typer.Option(help="Torque bound of the micro-action, in (0, 1].")] = 1.0,
-    k: Annotated[int | None, typer.Option(help="Low-level steps per skill call (default: each skill's own k).")] = None,
-    library: Annotated[Path | None, typer.Option(help="Skill library searched first.")] = None,
+    micro_duration: Annotated[
+        int, typer.Option(help="Low-level steps a micro-action lasts (needs --micro).", callback=check.count(1))
+    ] = 1,
+    micro_penalty: Annotated[
+        float, typer.Option(help="Penalty per use of the micro-action (needs --micro).", callback=check.real(0.0))
+    ] = 0.0,
+    micro_max_torque: Annotated[
+        float,
+        typer.Option(
+            help="Torque bound of the micro-action, in (0, 1] (needs --micro).", callback=check.real(0.0, 1.0, low_open=True)
+        ),
+    ] = 1.0,
+    k: Annotated[
+        int | None, typer.Option(help="Low-level steps per skill call (default: each skill's own k).", callback=check.count(1))
+    ] = None,
+    library: Annotated[
+        Path | None, typer.Option(help="Skill library searched first (an existing directory).", callback=check.existing_dir)
+    ] = None,
     handover: Annotated[
         bool,
         typer.Option(
@@ -268,7 +467,9 @@ def train_manager(
     steps: _STEPS = None,
     seed: _SEED = 0,
     run_dir: _RUN_DIR = None,
-    batch_steps: Annotated[int, typer.Option(help="Manager decisions per TRPO iteration (paper: 5,000).")] = 5_000,
+    batch_steps: Annotated[
+        int, typer.Option(help="Manager decisions per TRPO iteration (paper: 5,000).", callback=_BATCH_CHECK)
+    ] = 5_000,
     num_envs: _NUM_ENVS = 16,
     max_kl: _MAX_KL = 0.01,
     gamma: _GAMMA = 0.99,
@@ -282,15 +483,25 @@ def train_manager(
     resume: _RESUME = False,
 ) -> None:
     """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration."""
+    if not resume:  # options the Manager would silently ignore (with --resume they are compared with the run's)
+        if ignored := [f"--{n.replace('_', '-')}" for n in ("micro_duration", "micro_penalty", "micro_max_torque")
+                       if not micro and _given(ctx, n)]:  # fmt: skip
+            one = len(ignored) == 1
+            raise ValueError(f"{', '.join(ignored)} set{'s' if one else ''} the micro-action, which this Manager does not "
+                             f"have: add --micro, or leave {'it' if one else 'them'} out")  # fmt: skip
+        if k is not None and not skills.strip():
+            raise ValueError("--k sets how long each skill runs, and this Manager has no skills (--skills)")
+        _check_numbers(ctx)  # before torch is imported
+        _check_task(task, episode_steps, task_arg, ctx)
     from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 
     try:
         names = tuple(s.strip() for s in skills.split(",") if s.strip())
         m = MicroAction(micro_duration, micro_penalty, micro_max_torque) if micro else None
         spec = MacroSpec(names, k, m, None if library is None else str(library), Handover() if handover else None)
-    except ValueError as e:
+    except ValueError:
         if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
-            raise _fail(str(e)) from None
+            raise
         spec = None
     settings = dict(task=task, steps=_DEFAULT_STEPS if steps is None else steps, seed=seed, batch_steps=batch_steps,
                     num_envs=num_envs, episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec,
@@ -308,6 +519,8 @@ def parse_task_args(items: list[str] | None) -> dict[str, Any]:
         name, sep, raw = item.partition("=")
         if not sep or not name.strip():
             raise ValueError(f"--task-arg must look like NAME=VALUE, got {item!r}")
+        if name.strip() in out:
+            raise ValueError(f"--task-arg {name.strip()} is given twice ({out[name.strip()]!r} and {raw!r}); give it once")
         try:
             out[name.strip()] = json.loads(raw)
         except json.JSONDecodeError:
@@ -363,18 +576,62 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
             value = ValueFitConfig(max_iter=settings.pop("value_iters"), fraction=settings.pop("value_fraction"))
             cfg = TrainConfig(**settings, trpo=trpo, value=value, task_kwargs=parse_task_args(task_arg))
         env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
-    except (ValueError, CheckpointError) as e:
-        raise _fail(str(e)) from None
+    except CheckpointError as e:
+        raise ValueError(str(e)) from None
     kind = "train-manager" if cfg.macro is not None else "train"
-    try:
+    try:  # errors end as one line from the top-level handler (_OneLineErrors)
         summary = train_with_progress(cfg, out, resume, err_console, f"{kind} {cfg.task}")
-    except (ValueError, CheckpointError, StorageError) as e:
-        raise _fail(str(e)) from None
+    except StorageError:
+        raise
     except OSError as e:  # a file system error not already named by hrlp's writers
-        raise _fail(_os_error_line(e, out)) from None
+        raise OSError(_os_error_line(e, out)) from None
     console.print(summary.line(), soft_wrap=True)
     console.print(f"run written to {out} (checkpoint: {out / 'checkpoint'}, logs: progress.csv, tb/)")
     return out
+
+
+def _check_numbers(ctx: typer.Context) -> None:
+    """The checks of a fresh run's config that combine options (:mod:`hrlp.bounds`, as ``TrainConfig`` makes them), made
+    before torch is imported; a single option's bounds were checked while parsing."""
+    from hrlp.envs.check import default_episode_steps
+
+    p = ctx.params
+    if p["batch_steps"] < p["num_envs"]:
+        return  # TrainConfig says so in its own words
+    steps_per_env = -(-p["batch_steps"] // p["num_envs"])
+    problems = [
+        bounds.fraction_problem("fisher_fraction", p["fisher_fraction"], steps_per_env * p["num_envs"], "decisions"),
+        bounds.fraction_problem("value fraction", p["value_fraction"], steps_per_env, "time steps"),
+    ]
+    if ctx.info_name == "train-manager":
+        episode = p["episode_steps"] or default_episode_steps()
+        problems += [
+            bounds.duration_problem("k", p["k"], episode),
+            bounds.duration_problem("the micro-action's duration", p["micro_duration"] if p["micro"] else None, episode),
+        ]
+    if problem := next((x for x in problems if x is not None), None):
+        raise ValueError(problem)
+
+
+def _check_task(task: str, episode_steps: int | None, task_arg: list[str] | None, ctx: typer.Context | None) -> None:
+    """The checks of a fresh run that need no torch: the task, its arguments (:func:`hrlp.envs.check.probe_task`),
+    and options given on the command line that the task would silently ignore."""
+    import gymnasium as gym
+
+    from hrlp.envs import TASKS
+    from hrlp.envs.check import invalid_arguments_line, probe_task
+
+    kwargs = parse_task_args(task_arg)
+    name = task.removeprefix("hrlp/").removesuffix("-v0")
+    if ctx is not None and ctx.info_name == "train-manager" and name not in TASKS:
+        raise ValueError(f"{task}: a Manager commands arm skills, so its task must be an hrlp task (see 'hrlp tasks')")
+    valid = TASKS[name].arguments if name in TASKS else ()
+    if unknown := [k for k in kwargs if valid and k not in valid and k != "episode_steps"]:  # physics, render_mode, ...
+        raise ValueError(invalid_arguments_line(name, unknown, valid))
+    _, action_space = probe_task(task, episode_steps, **kwargs)
+    if ctx is not None and _given(ctx, "init_log_std") and isinstance(action_space, gym.spaces.Discrete):
+        raise ValueError(f"--init-log-std sets the Gaussian noise of continuous actions; {task}'s actions are "
+                         f"{action_space}, drawn from a categorical policy (leave --init-log-std out)")  # fmt: skip
 
 
 def _os_error_line(error: OSError, where: Path) -> str:
@@ -536,21 +793,21 @@ _RESUME_ACCESSORS: dict[str, tuple[Any, Any]] = {
 
 @app.command("eval")
 def eval_(
-    run_dir: Annotated[Path, typer.Argument(help="A run directory written by 'hrlp train'.")],
-    episodes: Annotated[int, typer.Option(help="Evaluation episodes.")] = 20,
-    seed: Annotated[int, typer.Option(help="Seed of the evaluation episodes.")] = 10_000,
+    run_dir: Annotated[Path, typer.Argument(help="A run directory written by 'hrlp train'.", callback=check.run_dir)],
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes.", callback=_EPISODES_CHECK)] = 20,
+    seed: Annotated[int, typer.Option(help="Seed of the evaluation episodes.", callback=check.seed())] = 10_000,
     stochastic: Annotated[bool, typer.Option(help="Sample actions instead of taking the mean.")] = False,
 ) -> None:
     """Mean return and success rate of a trained policy, with 95% confidence intervals."""
-    from hrlp.checkpoint import CheckpointError
+    from hrlp.atomic import StorageError
     from hrlp.evaluate import evaluate_run
 
-    try:
+    try:  # errors end as one line from the top-level handler (_OneLineErrors)
         ev = evaluate_run(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic)
-    except (ValueError, CheckpointError) as e:
-        raise _fail(str(e)) from None
+    except StorageError:
+        raise
     except OSError as e:
-        raise _fail(_os_error_line(e, run_dir)) from None
+        raise OSError(_os_error_line(e, run_dir)) from None
     console.print(f"episodes: {ev.episodes}")
     console.print(f"return (mean, 95% CI): {ev.ret}")
     if ev.success is not None:
@@ -575,23 +832,35 @@ _LIBRARY = Annotated[
 
 @skills_app.command("list")
 def skills_list(library: _LIBRARY = None) -> None:
-    """List the skills in the library and those shipped with hrlp (a library skill hides a shipped one of its name)."""
+    """List the skills in the library and those shipped with hrlp (a library skill hides a shipped one of its name).
+
+    A broken entry is listed too, marked 'broken', with its one-line reason on stderr; the others are listed as usual."""
+    from rich.markup import escape
+
     from hrlp.skills import SkillLibrary, shipped_library_root
 
     lib, shipped = SkillLibrary(library), SkillLibrary(shipped_library_root())
-    table = Table(title=f"skills in {lib.root} and shipped with hrlp")
+    table = Table(title=escape(f"skills in {lib.root} and shipped with hrlp"))
     for col in ("name", "task", "params", "k", "trained steps", "sha256", "from"):
         table.add_column(col)
     seen: set[str] = set()
+    broken: list[str] = []
     for source, where in ((lib, "library"), (shipped, "shipped")):
         for name in source.names():
             if name in seen:
                 continue
             seen.add(name)
-            m = source.manifest(name)
+            try:
+                m = source.manifest(name)
+            except ValueError as e:  # CheckpointError included: one entry's problem, not the listing's
+                table.add_row(escape(name), "[red]broken[/]", "", "", "", "", where)
+                broken.append(str(e))
+                continue
             table.add_row(name, m["task"], str(m["param"]["dim"]), str(m["k"]), f"{m['trained']['env_steps']:,}",
                           m["sha256"][:12], where)  # fmt: skip
     console.print(table)
+    for reason in broken:
+        err_console.print(f"[yellow]broken:[/] {escape(reason)}")
 
 
 @skills_app.command("show")
@@ -599,13 +868,14 @@ def skills_show(name: Annotated[str, typer.Argument(help="Skill name.")], librar
     """Show a skill's manifest: task, parameters and their meaning, default k, training config, content hash."""
     import json
 
-    from hrlp.skills import SkillLibrary, shipped_library_root
+    from rich.markup import escape
 
-    lib, shipped = SkillLibrary(library), SkillLibrary(shipped_library_root())
-    try:
-        m = (lib if name in lib.names() or name not in shipped.names() else shipped).manifest(name)
+    from hrlp.skills import SkillLibrary, locate_skill, shipped_library_root
+
+    try:  # the library first, then the shipped skills; a name with a path in it is refused, never followed
+        m = locate_skill(name, [SkillLibrary(library).root, shipped_library_root()]).manifest(name)
     except ValueError as e:
-        raise _fail(str(e)) from None
+        raise _fail(escape(str(e))) from None
     console.print_json(json.dumps(m))
 
 
@@ -669,30 +939,37 @@ def skills_build(
 
 @app.command()
 def dagger(
-    manager_run: Annotated[Path, typer.Argument(help="Run directory of a trained Manager.")],
+    manager_run: Annotated[Path, typer.Argument(help="Run directory of a trained Manager.", callback=check.run_dir)],
     skill: Annotated[str, typer.Option(help="The Manager's skill to retrain from its hand-over states.")] = "gripper",
     name: Annotated[str | None, typer.Option(help="Name of the retrained skill (default: SKILL-dagger).")] = None,
-    out: Annotated[Path | None, typer.Option(help="Directory of the round (default: MANAGER_RUN-dagger).")] = None,
+    out: Annotated[
+        Path | None, typer.Option(help="Directory of the round (default: MANAGER_RUN-dagger).", callback=check.out_dir)
+    ] = None,
     library: _LIBRARY = None,
-    states: Annotated[int, typer.Option(help="Hand-over states to collect.")] = 2_000,
-    skill_steps: Annotated[int, typer.Option(help="Environment steps of the skill's retraining.")] = 2_000_000,
-    starts_fraction: Annotated[float, typer.Option(help="Share of retraining episodes from hand-over states.")] = 0.5,
-    manager_steps: Annotated[int | None, typer.Option(help="Steps of the new Manager (default: the old one's).")] = None,
+    states: Annotated[
+        int, typer.Option(help="Hand-over states to collect.", callback=check.count(1, bounds.MAX_STATES, bounds.WHY_STATES))
+    ] = 2_000,
+    skill_steps: Annotated[
+        int, typer.Option(help="Environment steps of the skill's retraining.", callback=_STEPS_CHECK)
+    ] = 2_000_000,
+    starts_fraction: Annotated[
+        float,
+        typer.Option(help="Share of retraining episodes from hand-over states.", callback=check.real(0.0, 1.0, low_open=True)),
+    ] = 0.5,
+    manager_steps: Annotated[
+        int | None, typer.Option(help="Steps of the new Manager (default: the old one's).", callback=_STEPS_CHECK)
+    ] = None,
     workers: _WORKERS = 2,
-    episodes: Annotated[int, typer.Option(help="Evaluation episodes per success rate.")] = 100,
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes per success rate.", callback=_EPISODES_CHECK)] = 100,
     seed: _SEED = 0,
 ) -> None:
     """One DAgger round (Appendix C): collect the states where MANAGER_RUN calls SKILL, retrain the skill from them
     (warm-started), freeze it under a new name with its lineage, retrain the Manager with it, compare old and new."""
-    from hrlp.checkpoint import CheckpointError
     from hrlp.skills.dagger import DaggerConfig, run_round
 
-    try:
-        cfg = DaggerConfig(str(manager_run), skill, name or f"{skill}-dagger", None if library is None else str(library),
-                           states, skill_steps, starts_fraction, manager_steps, workers, episodes, seed)  # fmt: skip
-        res = run_round(cfg, out or manager_run.with_name(manager_run.name + "-dagger"), err_console)
-    except (ValueError, CheckpointError) as e:
-        raise _fail(str(e)) from None
+    cfg = DaggerConfig(str(manager_run), skill, name or f"{skill}-dagger", None if library is None else str(library),
+                       states, skill_steps, starts_fraction, manager_steps, workers, episodes, seed)  # fmt: skip
+    res = run_round(cfg, out or manager_run.with_name(manager_run.name + "-dagger"), err_console)  # errors: one line
 
     def cell(d: dict[str, Any]) -> str:
         return f"{d['mean']:.2f} [{d['low']:.2f}, {d['high']:.2f}]"
@@ -701,6 +978,38 @@ def dagger(
                       "skill_from_own_starts"), ("Manager", "manager")):  # fmt: skip
         console.print(f"{what}: {cell(res[key]['old'])} -> {cell(res[key]['new'])}")
     console.print(f"round written to {res['round_dir']}/round.json; new skill {res['new_skill']}")
+
+
+@app.command("runs")
+def runs_command(
+    root: Annotated[Path, typer.Argument(help="Directory searched for run directories (default runs).")] = Path("runs"),
+) -> None:
+    """List the run directories under ROOT: task and skills, steps done and asked for, training and evaluation
+    success, and whether a trainer holds the run now (read from their files alone; nothing is loaded or written)."""
+    from rich.markup import escape
+
+    from hrlp.runs import find_runs
+
+    try:
+        found = find_runs(root)
+    except ValueError as e:
+        raise _fail(escape(str(e))) from None
+    if not found:
+        console.print(f"no runs under {escape(str(root))} (a run directory holds config.json and progress.csv)")
+        return
+
+    def rate(v: float | None) -> str:
+        return "-" if v is None else f"{v:.2f}"
+
+    rows = [("run", "task", "steps", "train success", "eval success", "state")]
+    for r in found:
+        where = r.path.relative_to(root).as_posix() if r.path != Path(root) else "."
+        state = r.state if r.problem is None else f"{r.state}; unreadable: {r.problem}"
+        rows.append((where, r.task, f"{r.steps:,}/{r.budget:,}", rate(r.train_success), rate(r.eval_success), state))
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]) - 1)]
+    for row in rows:  # plain aligned columns, never cut to the terminal's width (a file or a pipe gets them whole)
+        print("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=False)) + "  " + row[-1])
+    print(f"{len(found)} run{'s' if len(found) != 1 else ''} under {root}")
 
 
 def main() -> None:

@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from hrlp.envs.check import parameterised_dims
 from hrlp.policies.distributions import flat_to_tuples
 from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
@@ -500,23 +501,6 @@ def action_decoder(space: gym.Space) -> Callable[[np.ndarray], Sequence]:
                 for k, *us in flat_to_tuples(a, dims)]  # fmt: skip
 
     return decode
-
-
-def parameterised_dims(space: gym.Space) -> tuple[int, ...]:
-    """The block sizes ``(d_1, ..., d_n)`` of a ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` space; ValueError otherwise."""
-    ok = (
-        isinstance(space, gym.spaces.Tuple)
-        and len(space.spaces) >= 2
-        and isinstance(space.spaces[0], gym.spaces.Discrete)
-        and int(space.spaces[0].start) == 0
-        and int(space.spaces[0].n) == len(space.spaces) - 1
-        and all(isinstance(b, gym.spaces.Box) and len(b.shape) == 1 for b in space.spaces[1:])
-    )
-    if not ok:
-        raise ValueError(
-            f"unsupported action space {space}: use Box, Discrete, or Tuple(Discrete(n), Box(d_1), ..., Box(d_n))"
-        )
-    return tuple(int(b.shape[0]) for b in space.spaces[1:])
 
 
 def mean_or_nan(values: Sequence[float | None]) -> float:

@@ -8,6 +8,7 @@ Manager's batch carries the per-decision discount gamma^tau that GAE applies.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import functools
@@ -25,11 +26,14 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from hrlp import bounds
 from hrlp.algos.kernels import gae
 from hrlp.algos.trpo import TRPOConfig, trpo_update
 from hrlp.algos.value import ValueFitConfig, fit_value
 from hrlp.atomic import atomic_path, directory_lock, writing
 from hrlp.checkpoint import (
+    META_FILE,
+    CheckpointError,
     checkpoint_exists,
     load_checkpoint,
     load_module,
@@ -95,6 +99,35 @@ class TrainConfig:
             raise ValueError(f"init_log_std must be a finite number, got {self.init_log_std!r}")
         if not isinstance(self.task_kwargs, dict) or not all(isinstance(k, str) for k in self.task_kwargs):
             raise ValueError(f"task_kwargs must map argument names to values, got {self.task_kwargs!r}")
+        self._check_bounds()
+
+    def _check_bounds(self) -> None:
+        """What a config may ask for (:mod:`hrlp.bounds`), and settings that would be silently meaningless."""
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= bounds.MAX_SEED:
+            raise ValueError(f"seed must be an integer in [0, {bounds.MAX_SEED}] (seeds are 32-bit), got {self.seed!r}")
+        for name, high, why in (("steps", bounds.MAX_STEPS, bounds.WHY_STEPS),
+                                ("batch_steps", bounds.MAX_BATCH_STEPS, bounds.WHY_BATCH_STEPS),
+                                ("num_envs", bounds.MAX_NUM_ENVS, bounds.WHY_NUM_ENVS)):  # fmt: skip
+            if (problem := bounds.count_problem(getattr(self, name), 1, high, why)) is not None:
+                raise ValueError(f"{name} {problem}")
+        if "episode_steps" in self.task_kwargs:
+            raise ValueError("give the episode length as episode_steps (--episode-steps), not as a task argument")
+        batch = self.steps_per_env * self.num_envs
+        problems = [
+            bounds.fraction_problem("fisher_fraction", self.trpo.fisher_fraction, batch, "decisions"),
+            bounds.fraction_problem("value fraction", self.value.fraction, self.steps_per_env, "time steps"),
+        ]
+        if self.macro is not None:
+            from hrlp.envs.check import default_episode_steps
+
+            episode = self.episode_steps or default_episode_steps()
+            micro = None if self.macro.micro is None else self.macro.micro.duration
+            problems += [
+                bounds.duration_problem("k", self.macro.k, episode),
+                bounds.duration_problem("the micro-action's duration", micro, episode),
+            ]
+        if problem := next((p for p in problems if p is not None), None):
+            raise ValueError(problem)
 
     @property
     def steps_per_env(self) -> int:
@@ -120,32 +153,26 @@ def env_factory(
     task: str, episode_steps: int | None = None, macro: MacroSpec | None = None, gamma: float = 0.99, **kwargs: Any
 ) -> Callable[[], gym.Env]:
     """A constructor for ``task`` (an hrlp task name/id or a Gymnasium id), wrapped in a :class:`MacroEnv` of
-    ``macro``'s skills (loaded once, shared, frozen) for a Manager. Raises ValueError for an unknown task, a
-    missing skill, or an unsupported action space, before any compute. The constructor can be pickled (sampler
-    worker processes rebuild it; a Manager's skills are then loaded again there, from the same files)."""
+    ``macro``'s skills (loaded once, shared, frozen) for a Manager. Raises ValueError, one line, before any compute,
+    for an unknown task, an unknown or invalid argument, a missing optional dependency, an unsupported space
+    (:func:`hrlp.envs.check.probe_task`) or a missing skill; for a Gymnasium id, ``episode_steps`` is its time limit.
+    The constructor can be pickled (sampler worker processes rebuild it; a Manager's skills are then loaded again
+    there, from the same files)."""
     from hrlp.envs import TASKS, make
+    from hrlp.envs.check import gym_kwargs, probe_task
 
     name = task.removeprefix("hrlp/").removesuffix("-v0")
+    if name not in TASKS and macro is not None:
+        raise ValueError(f"{task}: a Manager commands arm skills, so its task must be an hrlp task (see 'hrlp tasks')")
+    probe_task(task, episode_steps, **kwargs)  # validate arguments and spaces now, before any compute
     if name in TASKS:
         kw = dict(kwargs)
         if episode_steps is not None:
             kw["episode_steps"] = episode_steps
-        make(name, **kw).close()  # validate arguments now, before any compute
         if macro is None:
             return functools.partial(make, name, **kw)
         return _MacroFactory(name, kw, macro, gamma, macro.load_skills())
-    if macro is not None:
-        raise ValueError(f"{task}: a Manager commands arm skills, so its task must be an hrlp task (see 'hrlp tasks')")
-    if task not in gym.registry:
-        raise ValueError(f"unknown task {task!r}: not an hrlp task (see 'hrlp tasks') nor a registered Gymnasium id")
-    probe = gym.make(task, **kwargs)
-    space = probe.action_space
-    probe.close()
-    try:
-        action_decoder(space)
-    except ValueError as e:
-        raise ValueError(f"{task}: {e}") from None
-    return functools.partial(gym.make, task, **kwargs)
+    return functools.partial(gym.make, task, **gym_kwargs(task, episode_steps, kwargs))
 
 
 class _MacroFactory:
@@ -350,8 +377,8 @@ class Trainer:
         On CPU, with hrlp tasks (whose environments save their exact state), the resumed run produces the same
         numbers as an uninterrupted one. Other Gymnasium environments restart their episodes.
         """
-        tensors, meta = load_checkpoint(directory)
-        trainer = cls(TrainConfig.from_json(meta["config"]))
+        tensors, meta, cfg = read_run_checkpoint(directory, {"sampler": dict})
+        trainer = cls(cfg)
         check_skill_hashes(meta.get("skills", {}), trainer.skill_hashes, directory)
         load_module("policy", trainer.policy, tensors)
         load_module("value", trainer.value_net, tensors)
@@ -381,6 +408,27 @@ class Trainer:
                                      f"{float(tensor[where])}; refusing to save it over the checkpoint in "
                                      f"{directory}")  # fmt: skip
         return save_checkpoint(directory, tensors, meta)
+
+
+#: Keys of a training run's checkpoint meta that its readers need, with their JSON types. ``meta.json`` is not covered
+#: by the content hash (that is the weights' sha256; see :mod:`hrlp.checkpoint`), so they are checked on every read.
+RUN_META_KEYS: dict[str, type] = {"config": dict, "iteration": int, "env_steps": int, "normalizer": dict}
+
+
+def read_run_checkpoint(
+    directory: Path, more_keys: dict[str, type] | None = None
+) -> tuple[dict[str, torch.Tensor], dict[str, Any], TrainConfig]:
+    """``(tensors, meta, config)`` of a training run's checkpoint; a missing or mistyped key of :data:`RUN_META_KEYS`
+    (and ``more_keys``) or a malformed config raises :class:`~hrlp.checkpoint.CheckpointError` naming the file."""
+    tensors, meta = load_checkpoint(directory, required={**RUN_META_KEYS, **(more_keys or {})})
+    where = Path(directory) / META_FILE
+    try:
+        cfg = TrainConfig.from_json(meta["config"])
+    except KeyError as e:
+        raise CheckpointError(f"{where}: its 'config' has no {e}") from None
+    except (TypeError, ValueError, AttributeError) as e:
+        raise CheckpointError(f"{where}: its 'config' is malformed ({' '.join(str(e).split())})") from None
+    return tensors, meta, cfg
 
 
 def check_skill_hashes(saved: dict[str, str], loaded: dict[str, str], where: Path) -> None:
@@ -429,13 +477,12 @@ class TrainedPolicy:
 def load_trained(run_dir: Path) -> TrainedPolicy:
     """The policy of the run in ``run_dir`` (its ``checkpoint``), ready to act."""
     policy, normalizer, meta = load_policy(Path(run_dir) / "checkpoint")
-    return TrainedPolicy(policy, normalizer, TrainConfig.from_json(meta["config"]), meta)
+    return TrainedPolicy(policy, normalizer, TrainConfig.from_json(meta["config"]), meta)  # checked by load_policy
 
 
 def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, Any]]:
     """The trained policy (flat or Manager) and its frozen observation normaliser from a checkpoint directory."""
-    tensors, meta = load_checkpoint(directory)
-    cfg = TrainConfig.from_json(meta["config"])
+    tensors, meta, cfg = read_run_checkpoint(directory)
     env = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)()
     obs_dim = int(np.prod(env.observation_space.shape))
     if isinstance(env, MacroEnv):
@@ -633,7 +680,8 @@ def train(
                     raise ValueError(f"{run_dir}: --resume needs the run's own settings (only --steps may change); "
                                      f"{'; '.join(differences)}")  # fmt: skip
                 trainer.cfg = cfg
-                _truncate_log(run_dir / "progress.csv", trainer.iteration)
+            # Rows past the checkpoint (all of them for a run killed before its first one) are written again.
+            _truncate_log(run_dir / "progress.csv", trainer.iteration)
             config_path = run_dir / "config.json"
             with writing(config_path):
                 config_path.write_text(json.dumps(cfg.to_json(), indent=2))
@@ -643,8 +691,15 @@ def train(
             streak = 0
             while trainer.env_steps < cfg.steps:
                 stats = trainer.iterate()
-                trainer.save(checkpoint)
+                # The log row first, then the checkpoint: a kill between the two leaves a row past the checkpoint,
+                # which a resume drops and writes again; the other order would leave the iteration out of the log.
                 logger.log(stats)
+                try:
+                    trainer.save(checkpoint)
+                except BaseException:  # a refused or failed save: the log goes back to the checkpoint it matches
+                    with contextlib.suppress(OSError):
+                        _truncate_log(run_dir / "progress.csv", trainer.iteration - 1)
+                    raise
                 streak = 0 if stats.get("trpo/accepted", 1.0) else streak + 1
                 if warn_after_rejected > 0 and streak == warn_after_rejected:
                     warn(rejected_steps_message(streak, cfg, trainer.iteration))
@@ -685,9 +740,23 @@ class RunSummary:
         return out
 
 
+def progress_line(label: str, stats: dict[str, float], total: int, elapsed_s: float) -> str:
+    """One line for an iteration's statistics: what a log written to a file shows instead of a progress bar, e.g.
+    ``train Reacher: iteration 3, 150,000/1,000,000 steps (15%), return -40.2, success 0.12, kl 0.0098, 2714 steps/s,
+    55 s``."""
+    done = int(stats["env_steps"])
+    total = max(total, done, 1)
+    out = f"{label}: iteration {int(stats['iteration'])}, {done:,}/{total:,} steps ({done / total:.0%})"
+    out += f", return {stats['return_mean']:.1f}"
+    if not math.isnan(stats["success_rate"]):
+        out += f", success {stats['success_rate']:.2f}"
+    return out + f", kl {stats['trpo/kl']:.4f}, {stats['time/steps_per_s']:.0f} steps/s, {elapsed_s:.0f} s"
+
+
 def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, console: Any = None,
                         description: str | None = None) -> RunSummary:  # fmt: skip
-    """:func:`train` behind a rich progress bar on ``console`` (return, success, KL and steps/s so far).
+    """:func:`train` behind a rich progress bar on ``console`` (return, success, KL and steps/s so far); when
+    ``console`` is not a terminal (output written to a file or a pipe), a :func:`progress_line` per iteration instead.
 
     Before the first iteration it prints what will actually run when that differs from ``cfg.steps``
     (:meth:`StepPlan.note`); the bar counts the run's real steps against the real total (a Manager's total, unknown
@@ -701,7 +770,10 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
                TextColumn("{task.fields[status]}")]  # fmt: skip
     summary = RunSummary()
     streak = 0
-    with Progress(*columns, console=console) as progress:
+    lines = not console.is_terminal
+    label = description or f"train {cfg.task}"
+    t0 = time.perf_counter()
+    with Progress(*columns, console=console, disable=lines) as progress:
         start, bar_total, bar = 0, cfg.steps, None
 
         def started(plan: StepPlan) -> None:  # the bar appears once the run is set up (an error before: one line only)
@@ -709,7 +781,7 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
             start, bar_total = plan.done, plan.total or max(plan.requested, plan.done)
             if (note := plan.note()) is not None:
                 progress.console.print(f"[bold]note:[/] {note}", soft_wrap=True)
-            bar = progress.add_task(description or f"train {cfg.task}", total=bar_total, completed=plan.done, status="")
+            bar = progress.add_task(label, total=bar_total, completed=plan.done, status="")
 
         def warned(message: str) -> None:
             summary.warnings.append(message)
@@ -724,6 +796,8 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
             bar_total = max(bar_total, done)  # a Manager's last iteration passes cfg.steps: the bar says by how much
             assert bar is not None
             progress.update(bar, completed=done, total=bar_total, status=status)
+            if lines:
+                console.print(progress_line(label, st, bar_total, time.perf_counter() - t0), soft_wrap=True, highlight=False)
             summary.iterations += 1
             summary.env_steps, summary.env_steps_this_session = done, done - start
             streak = 0 if st.get("trpo/accepted", 1.0) else streak + 1
@@ -735,7 +809,7 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
 
 
 def _truncate_log(path: Path, iteration: int) -> None:
-    """Keep the header and the rows up to ``iteration`` (a kill between checkpoint and log leaves at most one gap)."""
+    """Keep the header and the rows up to ``iteration`` (a kill between a row and its checkpoint leaves one row more)."""
     rows = _read_csv(path)
     if rows:
         _write_csv(path, [rows[0]] + [r for r in rows[1:] if r and int(float(r[0])) <= iteration])

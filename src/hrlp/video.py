@@ -23,6 +23,86 @@ def check_video_path(path: Path) -> None:
         raise ValueError(f"cannot write {path}: {parent} is not a directory")
 
 
+class RenderingError(ValueError):
+    """MuJoCo cannot render here: its OpenGL backend (``MUJOCO_GL``) is missing a library or a display."""
+
+
+#: The Debian packages that provide each of MuJoCo's OpenGL backends (``MUJOCO_GL``).
+GL_PACKAGES = {
+    "egl": "libegl1 with a GPU driver's EGL or Mesa's libegl-mesa0",
+    "osmesa": "libosmesa6",
+    "glfw": "libglfw3 and a display",
+}
+
+
+def _gl_problem(backend: str, error: BaseException) -> str:
+    """One line for a failed OpenGL context of ``backend``: the package that is missing, or what else to use."""
+    import os
+
+    detail = " ".join(str(error).split())[:160] or type(error).__name__
+    if isinstance(error, ImportError):
+        if "PYOPENGL_PLATFORM" in detail:
+            return (f"MUJOCO_GL={backend} and PYOPENGL_PLATFORM={os.environ.get('PYOPENGL_PLATFORM')} disagree: unset "
+                    f"PYOPENGL_PLATFORM (MuJoCo sets it) or set it to {backend}")  # fmt: skip
+        return (f"MuJoCo's {backend or 'glfw'} rendering backend cannot be imported ({detail}): pip install pyopengl"
+                f"{' glfw' if backend in ('', 'glfw') else ''}")  # fmt: skip
+    other = "MUJOCO_GL=egl (Debian: libegl1) or MUJOCO_GL=osmesa (Debian: libosmesa6)"
+    if backend == "osmesa":
+        return ("MUJOCO_GL=osmesa: no OSMesa library (libOSMesa.so) could be loaded: install the Debian package "
+                "libosmesa6 (apt-get install libosmesa6), or use MUJOCO_GL=egl")  # fmt: skip
+    if backend == "egl":
+        return (f"MUJOCO_GL=egl: no EGL context could be created ({detail}): install the Debian package "
+                f"{GL_PACKAGES['egl']}, or use MUJOCO_GL=osmesa (Debian: libosmesa6)")  # fmt: skip
+    display = "DISPLAY is not set" if not os.environ.get("DISPLAY") else f"DISPLAY={os.environ['DISPLAY']}"
+    return (f"MuJoCo renders through GLFW{' (MUJOCO_GL unset)' if not backend else ''}, which needs a display ({display}; "
+            f"{detail}); to render off-screen set {other}")  # fmt: skip
+
+
+_GL_MODULES = ("mujoco/osmesa", "mujoco/egl", "mujoco/glfw", "mujoco/gl_context", "mujoco/rendering/classic/gl_context",
+               "mujoco/rendering/classic/renderer", "OpenGL/")  # fmt: skip
+
+
+def gl_failure_line(error: BaseException) -> str | None:
+    """The one line for an error raised while MuJoCo set up its OpenGL backend (at ``import mujoco`` when
+    ``MUJOCO_GL`` is egl or osmesa and its library is missing), or None for any other error."""
+    import os
+
+    tb = error.__traceback__
+    while tb is not None:
+        if any(m in tb.tb_frame.f_code.co_filename.replace(os.sep, "/") for m in _GL_MODULES):
+            return _gl_problem(os.environ.get("MUJOCO_GL", "").strip().lower(), error)
+        tb = tb.tb_next
+    return None
+
+
+def check_rendering(width: int, height: int) -> None:
+    """Raise, before any compute, :class:`RenderingError` if MuJoCo cannot render here (naming the Debian package of
+    the ``MUJOCO_GL`` backend that is missing), or ValueError if a ``width`` x ``height`` frame does not fit the
+    model's off-screen framebuffer. Costs one small OpenGL context (tens of milliseconds)."""
+    import os
+
+    import mujoco
+
+    from hrlp.envs.physics import model_xml
+
+    model = mujoco.MjModel.from_xml_string(model_xml())
+    max_w, max_h = int(model.vis.global_.offwidth), int(model.vis.global_.offheight)
+    for flag, value, high in (("--width", width, max_w), ("--height", height, max_h)):
+        if not 16 <= value <= high:
+            raise ValueError(f"{flag} must be in [16, {high}], got {value}: frames are rendered in the model's "
+                             f"off-screen framebuffer of {max_w}x{max_h} pixels")  # fmt: skip
+    import warnings
+
+    backend = os.environ.get("MUJOCO_GL", "").strip().lower()
+    try:
+        with warnings.catch_warnings():  # GLFW warns before it fails: the one line below says it all
+            warnings.simplefilter("ignore")
+            renderer = mujoco.Renderer(model, height=16, width=16)
+    except Exception as e:  # a system library or a display missing, however the backend says so
+        raise RenderingError(_gl_problem(backend, e)) from None
+    renderer.close()
+
+
 def label_frame(frame: np.ndarray, text: str) -> np.ndarray:
     """``frame`` [H, W, 3] with ``text`` written in its top-left corner (white on a dark box)."""
     from PIL import Image, ImageDraw, ImageFont

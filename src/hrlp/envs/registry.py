@@ -16,6 +16,7 @@ from typing import Any
 import gymnasium as gym
 
 from hrlp.envs.arm_env import ArmEnv
+from hrlp.envs.check import invalid_arguments_line
 from hrlp.envs.tasks import (
     GripperTask,
     GripReward,
@@ -46,16 +47,43 @@ class TaskSpec:
         """The Gymnasium id, e.g. 'hrlp/Gripper-v0'."""
         return f"{NAMESPACE}/{self.name}-v0"
 
+    @property
+    def arguments(self) -> tuple[str, ...]:
+        """The task's own arguments (``--task-arg NAME=VALUE``), e.g. ``c1``, ``tr`` for a gripping task."""
+        return self.build.arguments() if isinstance(self.build, _Build) else ()
 
-def _grip(cls: type, **fixed: Any) -> Callable[..., Task]:
-    # Gripping tasks take the reward constants (c1, c2, c3, tr) and the sparse thresholds
-    # (tr1, tr2) as flat keyword arguments, as the paper's tables name them.
-    def build(**kw: Any) -> Task:
-        reward = GripReward(**{k: kw.pop(k) for k in list(kw) if k in _GRIP_KWARGS})
-        sparse = SparseSuccess(**{k: kw.pop(k) for k in list(kw) if k in _SPARSE_KWARGS})
-        return cls(reward=reward, sparse=sparse, **fixed, **kw)
 
-    return build
+@dataclass(frozen=True, eq=False)  # compared and hashed by identity, as the functions it replaces
+class _Build:
+    """Builds a task class with some arguments fixed (e.g. a Reacher's variant); knows the arguments it takes."""
+
+    cls: type
+    fixed: dict[str, Any]
+    grip: bool = False
+    """Gripping tasks take the reward constants (c1, c2, c3, tr, ...) and the sparse thresholds (tr1, tr2) as flat
+    keyword arguments, as the paper's tables name them."""
+
+    def __call__(self, **kw: Any) -> Task:
+        if self.grip:
+            reward = GripReward(**{k: kw.pop(k) for k in list(kw) if k in _GRIP_KWARGS})
+            sparse = SparseSuccess(**{k: kw.pop(k) for k in list(kw) if k in _SPARSE_KWARGS})
+            kw = {"reward": reward, "sparse": sparse, **kw}
+        return self.cls(**self.fixed, **kw)
+
+    def arguments(self) -> tuple[str, ...]:
+        """The task's own arguments (not the environment's, such as ``episode_steps``), in the class's order."""
+        names = [n for n in inspect.signature(self.cls).parameters if n not in self.fixed]
+        if self.grip:
+            names = [n for n in names if n not in ("reward", "sparse")] + sorted(_GRIP_KWARGS) + sorted(_SPARSE_KWARGS)
+        return tuple(names)
+
+
+def _task(cls: type, **fixed: Any) -> _Build:
+    return _Build(cls, fixed)
+
+
+def _grip(cls: type, **fixed: Any) -> _Build:
+    return _Build(cls, fixed, grip=True)
 
 
 TASKS: dict[str, TaskSpec] = {
@@ -64,24 +92,22 @@ TASKS: dict[str, TaskSpec] = {
         TaskSpec(
             "Reacher",
             "hand to a 3-d goal above a capsule on the table (ReacherNormal)",
-            lambda **kw: ReacherTask(variant="normal", **kw),
+            _task(ReacherTask, variant="normal"),
         ),
         TaskSpec(
             "ReacherStabilised",
             "Reacher with a reward for a forearm parallel to the table",
-            lambda **kw: ReacherTask(variant="stabilised", **kw),
+            _task(ReacherTask, variant="stabilised"),
         ),
-        TaskSpec("Reacher3D", "hand to a goal anywhere in the reachable space", lambda **kw: ReacherTask(variant="3d", **kw)),
+        TaskSpec("Reacher3D", "hand to a goal anywhere in the reachable space", _task(ReacherTask, variant="3d")),
         TaskSpec(
             "ReacherHandover",
             "Reacher to a pre-grasp point above the capsule, leaving the capsule in place and the claw open",
-            lambda **kw: ReacherTask(variant="handover", **kw),
+            _task(ReacherTask, variant="handover"),
         ),
         TaskSpec("Gripper", "grip the capsule, palm starting near it (Figure 6 reward)", _grip(GripperTask)),
-        TaskSpec("MoverPlain", "move the capsule to a target, small start set", lambda **kw: MoverTask(variant="plain", **kw)),
-        TaskSpec(
-            "MoverNoised", "move the capsule to a target, large start set", lambda **kw: MoverTask(variant="noised", **kw)
-        ),
+        TaskSpec("MoverPlain", "move the capsule to a target, small start set", _task(MoverTask, variant="plain")),
+        TaskSpec("MoverNoised", "move the capsule to a target, large start set", _task(MoverTask, variant="noised")),
         TaskSpec(
             "ReachAndGrip1",
             "reach-and-grip Experiment 1: capsule fixed, palm on a circle",
@@ -92,7 +118,7 @@ TASKS: dict[str, TaskSpec] = {
             "reach-and-grip Experiment 2: capsule and palm on the circle independently",
             _grip(ReachAndGripTask, experiment=2),
         ),
-        TaskSpec("ReachAndMove", "reach-and-move: capsule fixed, target above it, random arm start", ReachAndMoveTask),
+        TaskSpec("ReachAndMove", "reach-and-move: capsule fixed, target above it, random arm start", _task(ReachAndMoveTask)),
     )
 }
 
@@ -105,9 +131,12 @@ def make(name: str, **kwargs: Any) -> ArmEnv:
     if name not in TASKS:
         raise ValueError(f"unknown task {name!r}; known tasks: {', '.join(TASKS)}")
     env_kw = {k: kwargs.pop(k) for k in list(kwargs) if k in _ENV_KWARGS}
+    valid = TASKS[name].arguments
+    if unknown := [k for k in kwargs if valid and k not in valid]:
+        raise ValueError(invalid_arguments_line(name, unknown, valid))
     try:
         task = TASKS[name].build(**kwargs)
-    except TypeError as e:  # an unknown keyword reaches a dataclass constructor
+    except TypeError as e:  # a value of the wrong type reaches a task's arithmetic
         raise ValueError(f"{name}: invalid argument ({e})") from None
     return ArmEnv(task, **env_kw)
 

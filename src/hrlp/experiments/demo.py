@@ -55,17 +55,17 @@ def run_demo(out_dir: Path, steps: int = DEMO_STEPS, seed: int = 0, episodes: in
     low-level steps, 0 for one episode) and ``learning_curve.png``."""
     import dataclasses
 
-    from hrlp.checkpoint import checkpoint_exists, load_checkpoint
+    from hrlp.checkpoint import checkpoint_exists
     from hrlp.evaluate import evaluate_run
     from hrlp.plots import plot_learning_curves
-    from hrlp.train import train_with_progress
+    from hrlp.train import read_run_checkpoint, train_with_progress
     from hrlp.video import rollout_frames, write_video
 
     console = console or Console(stderr=True)
     cfg = demo_config(steps, seed, workers)
     resume = checkpoint_exists(out_dir / "checkpoint")
     if resume:
-        saved = TrainConfig.from_json(load_checkpoint(out_dir / "checkpoint")[1]["config"])
+        saved = read_run_checkpoint(out_dir / "checkpoint")[2]
         if dataclasses.replace(saved, steps=cfg.steps) != cfg:
             raise ValueError(f"{out_dir} holds a different run; choose another --out-dir")
     cfg.macro.load_skills()  # a missing shipped skill fails here, before any compute

@@ -51,6 +51,8 @@ class Preset:
     """Default environment steps per run."""
     eval_episodes: int = 100
     tags: tuple[str, ...] = field(default_factory=tuple)
+    thresholds: tuple[float, ...] | None = None
+    """Training success rates of its sample-efficiency table (``hrlp tables``; None: the tables' defaults)."""
 
     def with_budget(self, steps: int) -> Preset:
         """The preset with every run's step budget set to ``steps``."""
@@ -297,6 +299,7 @@ PRESETS: dict[str, Preset] = {
                 Run("flat", _flat("ReachAndGrip1", task_kwargs={"c2": 3, "tr": 0.03})),
             ),
             budget=3_000_000,
+            thresholds=(0.05, 0.2, 0.5, 0.9),  # the issue's 20% and 50%, the flat run's first 5%, the Manager's 90%
         ),
         Preset(
             "reach-and-grip-2-handover",

@@ -18,6 +18,7 @@ import json
 import os
 import re
 import shutil
+import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -27,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from hrlp import bounds
 from hrlp.atomic import LOCK_FILE, atomic_path, directory_lock
 from hrlp.checkpoint import checkpoint_exists
 from hrlp.experiments.presets import PRESETS, Preset
@@ -142,7 +144,7 @@ def _run_job_locked(job: Job, reuse: bool) -> dict[str, Any]:
 
     from hrlp.evaluate import evaluate_run
     from hrlp.plots import read_progress
-    from hrlp.train import train
+    from hrlp.train import progress_line, train
 
     done = read_result(job.run_dir)
     if done is not None and done["env_steps"] >= job.config.steps:
@@ -151,8 +153,9 @@ def _run_job_locked(job: Job, reuse: bool) -> dict[str, Any]:
     if reuse and not resume and done is None and (source := find_same_run(job)) is not None:
         return copy_run(job, source)
     torch.set_num_threads(1)
-    for _ in train(job.config, job.run_dir, resume=resume):
-        pass
+    label, started = f"{job.preset} / {job.run} / seed {job.seed}", time.perf_counter()
+    for st in train(job.config, job.run_dir, resume=resume):  # a line per iteration: jobs run in parallel, bars would mix
+        print(progress_line(label, st, job.config.steps, time.perf_counter() - started), file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     ev = evaluate_run(job.run_dir, episodes=job.eval_episodes)
     progress = read_progress(job.run_dir)
@@ -204,6 +207,14 @@ def reproduce(
         raise ValueError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if (seeds is not None and seeds < 1) or (budget is not None and budget < 1) or workers < 1:
         raise ValueError("--seeds, --budget and --workers must be positive")
+    if workers > bounds.max_processes():
+        raise ValueError(f"--workers must be at most {bounds.max_processes()}, got {workers:,}: {bounds.why_processes()}")
+    if address is not None and backend != "ray":
+        raise ValueError(f"--address {address} is a Ray cluster's; it needs --backend ray (the {backend} backend ignores it)")
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file, not a directory")
+    if address is not None and (problem := bounds.ray_address_problem(address)) is not None:
+        raise ValueError(problem)
     preset = PRESETS[preset_name] if isinstance(preset_name, str) else preset_name
     if budget is not None:
         preset = preset.with_budget(budget)

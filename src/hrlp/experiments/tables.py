@@ -403,7 +403,7 @@ def default_out(root: Path) -> Path:
 def build_tables(
     root: Path,
     out: Path,
-    thresholds: Sequence[float] = DEFAULT_THRESHOLDS,
+    thresholds: Sequence[float] | None = None,
     window: int = SMOOTHING_WINDOW,
     overwrite: bool = False,
 ) -> list[Path]:
@@ -417,11 +417,12 @@ def build_tables(
     Each run's cell is the mean over seeds with a 95% percentile-bootstrap interval across seeds; a run with a
     single seed shows that run's own interval over its evaluation episodes (Wilson for success). Presets whose
     metric is success also get a sample-efficiency table (:func:`sample_efficiency_lines`) at ``thresholds`` of the
-    training success rate, smoothed over ``window`` iterations.
+    training success rate, smoothed over ``window`` iterations (None: each preset's own :attr:`Preset.thresholds`,
+    else :data:`DEFAULT_THRESHOLDS`).
     """
     from hrlp.plots import plot_learning_curves, read_progress
 
-    if not thresholds or not all(0 < th <= 1 for th in thresholds):
+    if thresholds is not None and (not thresholds or not all(0 < th <= 1 for th in thresholds)):
         raise ValueError(f"success thresholds must lie in (0, 1], got {list(thresholds)}")
     if window < 1:
         raise ValueError(f"the smoothing window must be at least 1 iteration, got {window}")
@@ -509,7 +510,8 @@ def build_tables(
                 name: (runs[name][0][1]["config"].get("macro") is not None, [read_progress(d) for d, _ in runs[name]])
                 for name in order
             }
-            lines += ["", *sample_efficiency_lines(logs, thresholds, window)]
+            own = thresholds or (preset.thresholds if preset and preset.thresholds else DEFAULT_THRESHOLDS)
+            lines += ["", *sample_efficiency_lines(logs, own, window)]
         md = out / f"{preset_name}.md"
         with atomic_path(md) as tmp:
             tmp.write_text("\n".join(lines) + "\n")

@@ -138,14 +138,14 @@ def run_round(cfg: DaggerConfig, out_dir: Path, console: Any = None) -> dict[str
     old and new skill from the hand-over states and from the skill's own starts, and of the old and new Manager."""
     from rich.console import Console
 
-    from hrlp.checkpoint import checkpoint_exists, load_checkpoint
+    from hrlp.checkpoint import checkpoint_exists
     from hrlp.evaluate import evaluate_run
-    from hrlp.train import TrainConfig, train_with_progress
+    from hrlp.train import read_run_checkpoint, train_with_progress
 
     console = console or Console(stderr=True)
     out_dir, manager_run = Path(out_dir), Path(cfg.manager_run)
     library = SkillLibrary(Path(cfg.library) if cfg.library else default_library_root())
-    manager_cfg = TrainConfig.from_json(load_checkpoint(manager_run / "checkpoint")[1]["config"])
+    manager_cfg = read_run_checkpoint(manager_run / "checkpoint")[2]
     if manager_cfg.macro is None or cfg.skill not in manager_cfg.macro.skills:
         raise ValueError(f"{manager_run}: not a Manager over skill {cfg.skill!r}")
     parent = load_skill(cfg.skill, manager_cfg.macro.library)
@@ -239,9 +239,10 @@ def _skill_dir(name: str, library: str | None) -> Path:
 
 
 def _finished(run_dir: Path, steps: int) -> bool:
-    from hrlp.checkpoint import checkpoint_exists, load_checkpoint
+    from hrlp.checkpoint import checkpoint_exists
+    from hrlp.train import read_run_checkpoint
 
-    return checkpoint_exists(run_dir / "checkpoint") and int(load_checkpoint(run_dir / "checkpoint")[1]["env_steps"]) >= steps
+    return checkpoint_exists(run_dir / "checkpoint") and read_run_checkpoint(run_dir / "checkpoint")[1]["env_steps"] >= steps
 
 
 def _parent_as_run(retrain: Any, run_dir: Path) -> Path:

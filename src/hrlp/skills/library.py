@@ -1,7 +1,21 @@
 """The skill library on disk: one checkpoint directory per skill (safetensors + JSON manifest).
 
-A skill file never runs code when loaded (safetensors, JSON; no pickle), and a tampered or
-truncated file fails with a one-line error naming it (the manifest holds the weights' sha256).
+A skill file may come from someone else, so loading one never runs code (safetensors, JSON; no pickle) and never
+trusts it (docs/reliability.md, "Skill files from someone else"). Every way in -- :meth:`SkillLibrary.load`,
+:meth:`SkillLibrary.manifest`, :func:`load_skill`, ``hrlp skills list/show`` and ``--skills`` -- makes the same checks,
+and each failure is one line naming the skill:
+
+* the name is a plain entry name (``..``, ``/abs/path`` and ``a/b`` are refused), and the entry is a directory inside
+  the library (a symbolic link may point to another place in the library, never out of it);
+* both files are regular files, opened without following links and without blocking (a FIFO or ``/dev/zero`` is
+  refused at once), no larger than :data:`SKILL_LIMITS`, the manifest at most 16 levels deep, and the weights' sha256
+  is the manifest's;
+* the manifest's numbers are checked against the task's declared layout (``obs_dim`` = 24 + the parameters,
+  ``act_dim`` = 9), against bounds (``k`` an integer from 1 to :data:`MAX_K`), and against the tensors' dtypes and
+  shapes in the safetensors header, before any tensor or network is allocated: every weight is floating point and
+  its shape is the one the manifest's network needs;
+* every weight and statistic is finite (no NaN or inf) and the normaliser's variances are non-negative.
+
 The library lives in ``$HRLP_SKILLS`` or ``~/.hrlp/skills``.
 """
 
@@ -9,15 +23,37 @@ from __future__ import annotations
 
 import os
 import re
+import stat
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from hrlp.checkpoint import CheckpointError, load_checkpoint, load_module, save_checkpoint
+import torch
+
+from hrlp.checkpoint import CheckpointError, ReadLimits, TensorInfo, load_module, read_checkpoint, save_checkpoint
+from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
 from hrlp.policies.mlp import GaussianPolicy
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.skills.skill import PARAM_SPECS, ParamSpec, Skill
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+#: Bounds on a skill's files: a manifest is about 2 KB and 5 levels deep, the weights of a 64x64 skill 27 KB.
+SKILL_LIMITS = ReadLimits(max_meta_bytes=1 << 20, max_weights_bytes=64 << 20, max_json_depth=16)
+#: Largest default duration ``k`` of a skill, in low-level steps (the paper's: 8, 10, 15; an episode: at most 1,000).
+MAX_K = 10_000
+#: Safetensors dtypes a skill's weights and statistics may have: floating point (integer weights act as zeros).
+FLOAT_DTYPES = ("F16", "BF16", "F32", "F64")
+
+
+class _SkillProblem(CheckpointError):
+    """Something wrong inside a skill's files, said without the skill's name (the library adds it)."""
+
+
+def check_skill_name(name: str) -> None:
+    """Raise ValueError unless ``name`` is a plain entry name of a skill library (no path: ``..``, ``/x``, ``a/b``)."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ValueError(f"skill name {name!r} is not a plain entry name of a skill library: use letters, digits, "
+                         "'_', '-', '.', starting with a letter or digit, at most 64 characters")  # fmt: skip
 
 
 def default_library_root() -> Path:
@@ -30,45 +66,160 @@ def shipped_library_root() -> Path:
     return Path(__file__).parent / "pretrained"
 
 
+def search_roots(library: str | Path | None = None) -> list[Path]:
+    """Where :func:`load_skill` looks, in order: ``library`` (if given), the user's library, the shipped skills."""
+    return ([Path(library)] if library is not None else []) + [default_library_root(), shipped_library_root()]
+
+
+def locate_skill(name: str, roots: Sequence[str | Path]) -> SkillLibrary:
+    """The first library of ``roots`` with an entry ``name``. Raises ValueError for a name that is not a plain entry
+    name, or one found nowhere (naming the entries of every root)."""
+    check_skill_name(name)
+    libraries = [SkillLibrary(Path(root)) for root in roots]
+    for lib in libraries:
+        if name in lib.names():
+            return lib
+    known = sorted({n for lib in libraries for n in lib.names()})
+    where = ", ".join(str(lib.root) for lib in libraries)
+    raise ValueError(f"no skill {name!r} in {where} (known: {', '.join(known) or 'none'})")
+
+
 def load_skill(name: str, library: str | Path | None = None) -> Skill:
     """The named skill, frozen, from ``library`` (if given), the user's library, or the shipped skills, in that order."""
-    roots = [Path(library)] if library is not None else []
-    roots += [default_library_root(), shipped_library_root()]
-    for root in roots:
-        lib = SkillLibrary(root)
-        if name in lib.names():
-            return lib.load(name)
-    known = sorted({n for r in roots for n in SkillLibrary(r).names()})
-    raise ValueError(f"no skill {name!r} in {', '.join(map(str, roots))} (known: {', '.join(known) or 'none'})")
+    return locate_skill(name, search_roots(library)).load(name)
 
 
 def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     """The trained policy's tensors and the facts about it, from a run directory written by ``hrlp train``."""
-    tensors, meta = load_checkpoint(Path(run_dir) / "checkpoint")
+    from hrlp.checkpoint import META_FILE, require_keys
+    from hrlp.train import read_run_checkpoint  # here: hrlp.train imports the skills package
+
+    tensors, meta, cfg = read_run_checkpoint(Path(run_dir) / "checkpoint")
     if meta.get("kind", "flat") != "flat":
         raise ValueError(f"{run_dir}: a skill is a flat policy; this run trained a {meta['kind']}")
-    task = meta["config"]["task"].removeprefix("hrlp/").removesuffix("-v0")
+    task = cfg.task.removeprefix("hrlp/").removesuffix("-v0")
     if task not in PARAM_SPECS:
         raise ValueError(f"{run_dir}: a skill must be trained on one of {', '.join(PARAM_SPECS)}, this run trained {task}")
+    require_keys(meta, {"obs_dim": int, "act_dim": int}, Path(run_dir) / "checkpoint" / META_FILE)
     kept = {k: v for k, v in tensors.items() if k.startswith(("policy.", "normalizer."))}
     return kept, {"task": task, "source": meta}
 
 
-def _param_spec(where: Path, manifest: dict[str, Any]) -> ParamSpec:
+def _param_spec(manifest: dict[str, Any]) -> ParamSpec:
     """The skill's parameter specification: the one declared in code for its task (:data:`PARAM_SPECS`); the manifest's
     copy must agree on the layout (dimension, where it enters the observation), so a skill file cannot redefine it."""
     task = manifest.get("task")
-    if task not in PARAM_SPECS:
-        raise CheckpointError(f"{where}: skill of unknown task {task!r} (known: {', '.join(PARAM_SPECS)})")
+    if not isinstance(task, str) or task not in PARAM_SPECS:
+        raise _SkillProblem(f"skill of unknown task {_short(task)} (known: {', '.join(PARAM_SPECS)})")
     spec = PARAM_SPECS[task]
     try:
         recorded = ParamSpec.from_json(manifest["param"])
-    except (KeyError, TypeError, ValueError) as e:
-        raise CheckpointError(f"{where}: manifest's 'param' is malformed ({e})") from None
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise _SkillProblem(f"manifest's 'param' is malformed ({_short(e, 80)})") from None
     if (recorded.dim, recorded.obs_start) != (spec.dim, spec.obs_start):
-        raise CheckpointError(f"{where}: manifest's parameters (dim {recorded.dim} at {recorded.obs_start}) do not match "
-                              f"task {task}'s (dim {spec.dim} at {spec.obs_start})")  # fmt: skip
+        raise _SkillProblem(f"manifest's parameters (dim {recorded.dim} at {recorded.obs_start}) do not match "
+                            f"task {task}'s (dim {spec.dim} at {spec.obs_start})")  # fmt: skip
     return spec
+
+
+def _short(value: Any, width: int = 40) -> str:
+    """``repr(value)`` on one line, cut to ``width`` characters."""
+    text = " ".join(repr(value).split()) if not isinstance(value, BaseException) else " ".join(str(value).split())
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def _integer(m: dict[str, Any], key: str, low: int, high: int, what: str) -> int:
+    value = m.get(key)
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        bound = f"from {low} to {high:,}" if low != high else f"{low}"
+        got = "nothing" if key not in m else f"{_short(value)} ({type(value).__name__})"
+        raise _SkillProblem(f"manifest's {key!r} ({what}) must be an integer {bound}, got {got}")
+    return value
+
+
+def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...]]:
+    """``(param, k, hidden)`` of a skill's manifest, whose every number is checked; raises :class:`_SkillProblem`."""
+    if m.get("kind") != "skill":
+        raise _SkillProblem(f"not a skill (kind {_short(m.get('kind'))})")
+    param = _param_spec(m)
+    k = _integer(m, "k", 1, MAX_K, "default duration")
+    _integer(m, "obs_dim", BASE_OBS_DIM + param.dim, BASE_OBS_DIM + param.dim, f"observation size of a {m['task']} skill")
+    _integer(m, "act_dim", N_JOINTS, N_JOINTS, "torques of the arm's joints")
+    hidden = m.get("hidden")
+    if not isinstance(hidden, list) or not all(isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in hidden):
+        raise _SkillProblem(f"manifest's 'hidden' must be a list of positive layer widths, got {_short(hidden)}")
+    norm = m.get("normalizer")
+    if not isinstance(norm, dict) or norm.get("shape") != [BASE_OBS_DIM + param.dim]:
+        raise _SkillProblem(f"manifest's 'normalizer' must be an object with shape [{BASE_OBS_DIM + param.dim}], "
+                            f"got {_short(norm)}")  # fmt: skip
+    clip, eps, frozen = norm.get("clip"), norm.get("eps", 1e-8), norm.get("frozen", False)
+    if not (clip is None or (_number(clip) and clip > 0)) or not (_number(eps) and eps >= 0) or not isinstance(frozen, bool):
+        raise _SkillProblem(f"manifest's normaliser settings are invalid (clip {_short(clip)}, eps {_short(eps)}, "
+                            f"frozen {_short(frozen)})")  # fmt: skip
+    trained = m.get("trained")
+    if not isinstance(trained, dict) or not isinstance(trained.get("config"), dict):
+        raise _SkillProblem(f"manifest's 'trained' must be an object holding the training 'config', got {_short(trained)}")
+    _integer(trained, "env_steps", 0, 2**62, "environment steps it was trained for")
+    return param, k, tuple(hidden)
+
+
+def _number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _expected_tensors(m: dict[str, Any]) -> dict[str, tuple[int, ...]]:
+    """The shape of every tensor of the network and normaliser that a (checked) manifest describes."""
+    obs_dim, act_dim, hidden = m["obs_dim"], m["act_dim"], list(m["hidden"])
+    widths = [obs_dim, *hidden, act_dim]
+    out: dict[str, tuple[int, ...]] = {"policy.log_std": (act_dim,)}
+    for i in range(len(widths) - 1):  # mean_net is Linear, Tanh, Linear, Tanh, ..., Linear: linears at even indices
+        out[f"policy.mean_net.{2 * i}.weight"] = (widths[i + 1], widths[i])
+        out[f"policy.mean_net.{2 * i}.bias"] = (widths[i + 1],)
+    out |= {"normalizer.count": (), "normalizer.mean": (obs_dim,), "normalizer.var": (obs_dim,)}
+    return out
+
+
+def _check_header(m: dict[str, Any], header: dict[str, TensorInfo]) -> None:
+    """The manifest against the tensors' names, dtypes and shapes in the safetensors header, before any is built."""
+    _check_manifest(m)
+    expected = _expected_tensors(m)
+    network = f"obs_dim {m['obs_dim']}, hidden {m['hidden']}, act_dim {m['act_dim']}"
+    missing, unexpected = sorted(set(expected) - set(header)), sorted(set(header) - set(expected))
+    if missing or unexpected:
+        said = ", ".join(p for p in (f"missing {', '.join(missing)}" if missing else "",
+                                     f"unexpected {', '.join(unexpected)}" if unexpected else "") if p)  # fmt: skip
+        said = said if len(said) <= 160 else said[:157] + "..."
+        raise _SkillProblem(f"its weights do not fit the network its manifest describes ({network}): {said}")
+    for name, info in sorted(header.items()):
+        if info.dtype not in FLOAT_DTYPES:
+            raise _SkillProblem(f"{name} is {_short(info.dtype)}; a skill's weights must be floating point "
+                                f"({', '.join(FLOAT_DTYPES)})")  # fmt: skip
+        if info.shape != expected[name]:
+            raise _SkillProblem(f"{name} has shape {list(info.shape)} in its weights, {list(expected[name])} in the "
+                                f"network its manifest describes ({network})")  # fmt: skip
+
+
+def _check_values(tensors: dict[str, torch.Tensor]) -> None:
+    """Every weight and statistic finite, the normaliser's variances and count non-negative."""
+    for name, tensor in sorted(tensors.items()):
+        bad = ~torch.isfinite(tensor)
+        if bool(bad.any()):
+            raise _SkillProblem(f"{name} holds NaN or inf ({int(bad.sum())} of {tensor.numel()} values)")
+    for name in ("normalizer.var", "normalizer.count"):
+        if bool((tensors[name] < 0).any()):
+            raise _SkillProblem(f"{name} is negative")
+
+
+def _entry_kind(path: Path) -> str:
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as e:
+        return f"cannot be read: {e.strerror}"
+    for test, kind in ((stat.S_ISREG, "a regular file"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a device"),
+                       (stat.S_ISSOCK, "a socket")):  # fmt: skip
+        if test(mode):
+            return kind
+    return "not a directory"
 
 
 class SkillLibrary:
@@ -78,10 +229,44 @@ class SkillLibrary:
         self.root = Path(root) if root is not None else default_library_root()
 
     def names(self) -> list[str]:
-        """Names of the skills in the library, sorted."""
-        if not self.root.is_dir():
+        """Names of the library's entries, sorted: everything in it but regular files (a README) and names starting with
+        '.', whether or not it holds a valid skill (:meth:`manifest` and :meth:`load` say what is wrong with one)."""
+        try:
+            with os.scandir(self.root) as entries:
+                return sorted(e.name for e in entries if not e.name.startswith(".") and not e.is_file(follow_symlinks=False))
+        except OSError:  # no library (yet), or not a directory
             return []
-        return sorted(p.name for p in self.root.iterdir() if (p / "meta.json").is_file() and not p.name.startswith("."))
+
+    def _known(self) -> str:
+        return ", ".join(self.names()) or "none"
+
+    def entry(self, name: str) -> Path:
+        """The directory of the skill ``name``, checked: a plain entry name, an entry of this library, a directory,
+        not a symbolic link out of the library. Raises ValueError (CheckpointError for a broken entry)."""
+        check_skill_name(name)
+        path = self.root / name
+        if not os.path.lexists(path):
+            raise ValueError(f"no skill {name!r} in {self.root} (known: {self._known()})")
+        if path.is_symlink():
+            target, root = os.path.realpath(path), os.path.realpath(self.root)
+            if os.path.commonpath([target, root]) != root or target == root:
+                raise CheckpointError(f"skill {name!r} ({path}): a symbolic link out of the library (-> "
+                                      f"{os.readlink(path)}); copy the skill into {self.root} instead")  # fmt: skip
+        if not path.is_dir():
+            raise CheckpointError(f"skill {name!r} ({path}): not a skill directory ({_entry_kind(path)})")
+        return path
+
+    def _read(self, name: str) -> tuple[dict[str, torch.Tensor], dict[str, Any], str]:
+        """``(tensors, manifest, sha256)`` of the skill ``name``, after every check of the module docstring."""
+        path = self.entry(name)
+        try:
+            tensors, m, sha256 = read_checkpoint(path, limits=SKILL_LIMITS, before_tensors=_check_header)
+            _check_values(tensors)
+        except _SkillProblem as e:
+            raise CheckpointError(f"skill {name!r} ({path}): {e}") from None
+        except CheckpointError as e:
+            raise CheckpointError(f"skill {name!r}: {e}") from None
+        return tensors, m, sha256
 
     def add(
         self, run_dir: Path, name: str, k: int = 15, overwrite: bool = False, lineage: dict[str, Any] | None = None
@@ -90,10 +275,9 @@ class SkillLibrary:
 
         ``lineage`` (JSON), if given, is recorded in the manifest: where the skill came from (``hrlp dagger`` records
         the parent skill and its sha256, the Manager whose hand-over states it was retrained from, and the round)."""
-        if not _NAME.match(name):
-            raise ValueError(f"skill name {name!r}: use letters, digits, '_', '-', '.' (at most 64 characters)")
-        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
-            raise ValueError(f"skill {name}: default duration k must be a positive integer, got {k!r}")
+        check_skill_name(name)
+        if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= MAX_K:
+            raise ValueError(f"skill {name}: default duration k must be a positive integer (at most {MAX_K:,}), got {k!r}")
         target = self.root / name
         if target.exists() and not overwrite:
             raise ValueError(f"skill {name!r} already exists in {self.root}; pass overwrite to replace it")
@@ -116,32 +300,36 @@ class SkillLibrary:
         return save_checkpoint(target, tensors, manifest)
 
     def manifest(self, name: str) -> dict[str, Any]:
-        """The skill's manifest (with its content hash under ``sha256``)."""
-        import json
-
-        path = self.root / name / "meta.json"
-        if not path.is_file():
-            raise ValueError(f"no skill {name!r} in {self.root} (known: {', '.join(self.names()) or 'none'})")
-        try:
-            raw = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise CheckpointError(f"{path}: invalid JSON ({e.msg})") from None
-        return {**raw["meta"], "sha256": raw["sha256"]}
+        """The manifest of the skill ``name`` (with its content hash under ``sha256``), once the skill has passed
+        every check that :meth:`load` makes; raises the same one-line errors."""
+        _, m, sha256 = self._read(name)
+        return {**m, "sha256": sha256}
 
     def load(self, name: str) -> Skill:
-        """The named skill, frozen. Raises a one-line error for a missing, tampered or truncated skill."""
-        if name not in self.names():
-            raise ValueError(f"no skill {name!r} in {self.root} (known: {', '.join(self.names()) or 'none'})")
-        tensors, m = load_checkpoint(self.root / name)
-        if m.get("kind") != "skill":
-            raise CheckpointError(f"{self.root / name}: not a skill (kind {m.get('kind')!r})")
-        param = _param_spec(self.root / name, m)
-        policy = GaussianPolicy(int(m["obs_dim"]), int(m["act_dim"]), tuple(m["hidden"]))
-        load_module("policy", policy, tensors)
-        norm = RunningNormalizer.from_config(
-            m["normalizer"], {k.removeprefix("normalizer."): v for k, v in tensors.items() if k.startswith("normalizer.")}
-        )
-        return Skill(name, m["task"], param, int(m["k"]), policy, norm, self.manifest(name)["sha256"])
+        """The named skill, frozen. Raises a one-line error naming the skill for a missing, tampered, truncated or
+        degenerate one (module docstring); the network is built only from a manifest its tensors agree with."""
+        tensors, m, sha256 = self._read(name)
+        param, k, hidden = _check_manifest(m)
+        policy = GaussianPolicy(m["obs_dim"], m["act_dim"], hidden)
+        stats = {key.removeprefix("normalizer."): v for key, v in tensors.items() if key.startswith("normalizer.")}
+        try:
+            load_module("policy", policy, tensors)
+            norm = RunningNormalizer.from_config(m["normalizer"], stats)
+        except ValueError as e:  # not expected after the checks; named all the same
+            raise CheckpointError(f"skill {name!r} ({self.root / name}): {_short(e, 200)}") from None
+        return Skill(name, m["task"], param, k, policy, norm, sha256)
 
 
-__all__ = ["SkillLibrary", "default_library_root", "load_skill", "shipped_library_root", "skill_from_run"]
+__all__ = [
+    "FLOAT_DTYPES",
+    "MAX_K",
+    "SKILL_LIMITS",
+    "SkillLibrary",
+    "check_skill_name",
+    "default_library_root",
+    "load_skill",
+    "locate_skill",
+    "search_roots",
+    "shipped_library_root",
+    "skill_from_run",
+]

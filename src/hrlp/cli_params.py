@@ -1,0 +1,103 @@
+"""Checks of the ``hrlp`` command's options while click parses them, before a command runs (and before torch is
+imported): bounded counts and seeds, finite numbers in their intervals, directories to write into and run directories
+to read. Each failure is a :class:`BoundError` whose message names the option, the bound and, for an upper bound, why
+(:mod:`hrlp.bounds`); ``hrlp``'s top-level handler prints it as one line."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from hrlp import bounds
+
+Check = Callable[[typer.CallbackParam, Any], Any]
+
+
+class BoundError(typer.BadParameter):
+    """An option's value outside what hrlp accepts; the message names the option."""
+
+
+def _flag(param: typer.CallbackParam) -> str:
+    if param.param_type_name == "argument":
+        return str(param.metavar or param.name).upper()
+    return max(param.opts, key=len) if param.opts else f"--{str(param.name).replace('_', '-')}"
+
+
+def count(
+    low: int | None = 1,
+    high: int | Callable[[], int] | None = None,
+    why: str | Callable[[], str] = "",
+    unit: str = "integer",
+) -> Check:
+    """An integer option (or None) in ``[low, high]`` (None: unbounded, e.g. when the config's own check of the lower
+    bound says it better); ``high`` and ``why`` may be computed when the option is parsed; ``unit`` names what a
+    positive value counts (``must be a positive UNIT``)."""
+
+    def check(param: typer.CallbackParam, value: Any) -> Any:
+        for v in value if isinstance(value, list | tuple) else [value]:
+            if v is None:
+                continue
+            hi = high() if callable(high) else high
+            if (problem := bounds.count_problem(v, low, hi, why() if callable(why) else why, unit)) is not None:
+                raise BoundError(f"{_flag(param)} {problem}")
+        return value
+
+    return check
+
+
+def seed() -> Check:
+    """A seed: an integer in ``[0, 2**32 - 1]``."""
+    return count(0, bounds.MAX_SEED, "seeds are 32-bit")
+
+
+def workers() -> Check:
+    """A number of worker processes: positive, at most :func:`hrlp.bounds.max_processes`."""
+    return count(1, bounds.max_processes, bounds.why_processes)
+
+
+def real(low: float | None = None, high: float | None = None, low_open: bool = False, high_open: bool = False) -> Check:
+    """A finite number option (or None; each item of a repeated option) in the interval."""
+
+    def check(param: typer.CallbackParam, value: Any) -> Any:
+        for v in value if isinstance(value, list | tuple) else [value]:
+            if v is not None and (problem := bounds.real_problem(v, low, high, low_open, high_open)) is not None:
+                raise BoundError(f"{_flag(param)} {problem}")
+        return value
+
+    return check
+
+
+def out_dir(param: typer.CallbackParam, value: Path | None) -> Path | None:
+    """A directory hrlp writes into (created if missing): neither it nor any directory above it may be a file."""
+    if value is None:
+        return value
+    for p in (value, *value.parents):
+        if p.exists() or p.is_symlink():
+            if not p.is_dir():
+                what = "is" if p == value else f"lies under {p}, which is"
+                raise BoundError(f"{_flag(param)} {value} {what} a file, not a directory")
+            break
+    return value
+
+
+def run_dir(param: typer.CallbackParam, value: Path | None) -> Path | None:
+    """An existing run directory to read."""
+    if value is None:
+        return value
+    if not value.exists():
+        raise BoundError(f"{_flag(param)} {value}: no such run directory (no checkpoint to read)")
+    if not value.is_dir():
+        raise BoundError(f"{_flag(param)} {value} is a file, not a run directory")
+    return value
+
+
+def existing_dir(param: typer.CallbackParam, value: Path | None) -> Path | None:
+    """An existing directory to read (e.g. a skill library)."""
+    if value is None:
+        return value
+    if not value.is_dir():
+        raise BoundError(f"{_flag(param)} {value}: {'not a directory' if value.exists() else 'no such directory'}")
+    return value
