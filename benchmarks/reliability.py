@@ -127,7 +127,8 @@ def bad_cli_inputs(scratch: Path, parallel: int, verbose: bool) -> str:
     return (f"bad CLI inputs: {len(CASES)}" + (f" ({skipped} not possible on this machine)" if skipped else "")
             + f" -> {verdicts['traceback']} tracebacks, {verdicts['silent']} silent acceptances, {verdicts['hang']} hangs, "
             f"{bad} errors that are not one right line; each error within {aside[slow]:.2f} s of start-up, torch import "
-            f"aside (median {statistics.median(aside.values()):.2f} s; slowest {slow}), {wall[slowest]:.2f} s with it "
+            f"aside (median {statistics.median(aside.values()):.2f} s, {sum(v > 2 for v in aside.values())} over 2 s; "
+            f"slowest {slow}), {wall[slowest]:.2f} s with it "
             f"({slowest}); {parallel} at a time on {os.cpu_count()} cores, load average up to {load:.1f}")  # fmt: skip
 
 
