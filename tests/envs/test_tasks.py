@@ -297,3 +297,19 @@ def test_gripper_push_term_charges_knocking_the_capsule_away_not_holding_it():
     assert "push" not in make("Gripper").task.reward_terms(make("Gripper").physics)  # default: the paper's terms
     with pytest.raises(ValueError, match="push_coeff"):
         make("Gripper", push_coeff=-1.0)
+
+
+def test_gripper_can_observe_the_capsules_pose():
+    # The paper's 24 numbers hold C but not how the capsule lies: a pushed capsule's yaw is invisible. With
+    # observe_capsule, 6 numbers follow: (cos 2 yaw, sin 2 yaw, a_z^2) of its axis, then its linear velocity.
+    plain, seen = make("Gripper"), make("Gripper", observe_capsule=True)
+    assert plain.observation_space.shape == (24,) and seen.observation_space.shape == (30,)
+    obs, _ = seen.reset(seed=3)
+    c = seen.unwrapped.physics.capsule
+    yaw = math.atan2(c[1], c[0] + 0.15) + math.pi / 2  # lies tangent to the start circle around the base axis
+    np.testing.assert_allclose(obs[24:27], [math.cos(2 * yaw), math.sin(2 * yaw), 0.0], atol=1e-9)
+    np.testing.assert_allclose(obs[27:30], 0.0, atol=1e-9)  # at rest
+    seen.unwrapped.physics.data.qvel[9:12] = [0.1, -0.2, 0.3]
+    np.testing.assert_allclose(seen.unwrapped.physics.capsule_pose_features(np.zeros(6))[3:], [0.1, -0.2, 0.3])
+    with pytest.raises(ValueError, match="observe_capsule must be true or false"):
+        make("Gripper", observe_capsule="yes")

@@ -164,6 +164,16 @@ class ArmPhysics:
         """C: the capsule's centre of mass. [3]"""
         return self._capsule_v
 
+    def capsule_pose_features(self, out: np.ndarray) -> np.ndarray:
+        """Write 6 numbers into ``out[:6]``: the capsule's axis a as ``(a_x^2 - a_y^2, 2 a_x a_y, a_z^2)`` (continuous, and
+        the same for a and -a, as a capsule is symmetric: for a capsule lying at yaw theta, ``(cos 2 theta, sin 2 theta,
+        0)``) and the capsule's linear velocity, m/s (what the paper's 24 numbers leave out)."""
+        ax = self._capsule_axis_v
+        x, y, z = ax[2], ax[5], ax[8]
+        out[0], out[1], out[2] = x * x - y * y, 2.0 * x * y, z * z
+        out[3:6] = self.data.qvel[N_JOINTS : N_JOINTS + 3]  # the free joint's linear velocity, world frame
+        return out
+
     @property
     def target(self) -> np.ndarray:
         """T: the centre of the shadow capsule, where the capsule should be moved. [3]"""

@@ -381,10 +381,11 @@ class GripReward:
         }
 
 
-def _grip_terms(reward: GripReward, sparse: SparseSuccess, physics: ArmPhysics) -> dict[str, float]:
+def _grip_terms(reward: GripReward, sparse: SparseSuccess, physics: ArmPhysics, held: bool | None = None) -> dict[str, float]:
+    """GripReward's terms, with ``c4`` paid while Definition 1 holds (``held``, evaluated here if not given)."""
     terms = reward.terms(physics)
     if reward.c4:
-        terms["gripped"] = reward.c4 if sparse(physics) else 0.0
+        terms["gripped"] = reward.c4 if (sparse(physics) if held is None else held) else 0.0
     return terms
 
 
@@ -445,10 +446,24 @@ class GripperTask(Task):
     """Weight of a fourth reward term, -push_coeff * the capsule's horizontal displacement from where it lay at the
     episode's start, paid while Definition 1 does not hold: knocking the capsule away costs, lifting it in the claw
     does not (0: the paper's reward)."""
+    observe_capsule: bool = False
+    """Append the capsule's pose to the observation (:meth:`ArmPhysics.capsule_pose_features`: its axis and velocity,
+    6 numbers) for a Gripper that sees how a pushed capsule lies (False: the paper's 24 numbers, as the shipped skills)."""
     start_capsule: np.ndarray = field(default_factory=lambda: np.zeros(3), init=False, compare=False, repr=False)
     """Where the capsule lay at the episode's start (episode state). [3]"""
 
+    @property
+    def extra_obs_dim(self) -> int:  # type: ignore[override]
+        """6 with :attr:`observe_capsule`, else 0."""
+        return 6 if self.observe_capsule else 0
+
+    def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
+        if self.observe_capsule:
+            physics.capsule_pose_features(out)
+
     def __post_init__(self) -> None:
+        if not isinstance(self.observe_capsule, bool):
+            raise ValueError(f"GripperTask.observe_capsule must be true or false, got {self.observe_capsule!r}")
         _nonneg(self, "angle_range", "push_coeff")
         for name, top in (("start_distance", 0.3), ("finger_opening", 1.05)):
             v = tuple(getattr(self, name))
@@ -479,11 +494,12 @@ class GripperTask(Task):
         self.start_capsule[:] = physics.capsule
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
-        terms = _grip_terms(self.reward, self.sparse, physics)
-        if self.push_coeff:
-            c, c0 = physics.capsule, self.start_capsule
-            held = self.sparse(physics)
-            terms["push"] = 0.0 if held else -self.push_coeff * math.hypot(c[0] - c0[0], c[1] - c0[1])
+        if not self.push_coeff:
+            return _grip_terms(self.reward, self.sparse, physics)
+        held = self.sparse(physics)  # Definition 1, once per step for both terms that need it
+        terms = _grip_terms(self.reward, self.sparse, physics, held)
+        c, c0 = physics.capsule, self.start_capsule
+        terms["push"] = 0.0 if held else -self.push_coeff * math.hypot(c[0] - c0[0], c[1] - c0[1])
         return terms
 
     def episode_state(self) -> dict[str, np.ndarray]:
