@@ -8,6 +8,10 @@ from the bank and from the recipe's own start set, with Wilson 95% intervals. Th
 ``docs/results/gripper-variants.json`` came from ``--steps 1500000`` (axis also 3000000) with DAgger round 1's bank.
 
     python benchmarks/gripper_variants.py --bank runs/dagger/round1/starts.npz --variant axis --out runs/gripper-axis
+
+Each run is also evaluated from the paper's default starts (H 5-9 cm from C, the claw at rest). ``--evaluate RUN``
+evaluates a finished Gripper run of any recipe instead of training one (the from-scratch Grippers of
+``gripper-variants.json``'s ``from_scratch``, trained with ``hrlp train Gripper ...``: docs/results/README.md).
 """
 
 from __future__ import annotations
@@ -21,11 +25,31 @@ from rich.console import Console
 
 from hrlp.checkpoint import checkpoint_exists
 from hrlp.evaluate import evaluate_run
-from hrlp.skills.dagger import DaggerConfig, _skill_dir, skill_config
-from hrlp.skills.library import SkillLibrary
+from hrlp.skills.dagger import DaggerConfig, skill_config
+from hrlp.skills.library import locate_skill, search_roots
 from hrlp.train import train_with_progress
 
 VARIANTS = {"centre": {}, "axis": {"distance": "axis"}, "axis+push": {"distance": "axis", "push_coeff": 10.0}}
+
+
+START_SETS = (
+    ("handover", {"starts_fraction": 1.0}),
+    ("own", {"starts_fraction": 0.0}),
+    ("paper_default", {"starts": None, "start_distance": [0.05, 0.09], "finger_opening": [0, 0]}),
+)
+"""Where evaluation episodes start: the bank's hand-over states, the run's own start set, the paper's default starts."""
+
+
+def evaluate_gripper(run: Path, bank: Path, episodes: int, label: str) -> dict[str, list[float]]:
+    """Greedy success of the Gripper run ``run`` from each of :data:`START_SETS`: ``[mean, Wilson low, high]``."""
+    results = {}
+    for where, kwargs in START_SETS:
+        ev = evaluate_run(run, episodes=episodes, task_kwargs={"starts": str(bank.resolve()), **kwargs})
+        assert ev.success is not None
+        results[where] = [ev.success.mean, ev.success.low, ev.success.high]
+        print(f"{label}, from {where} starts: success {ev.success.mean:.2f} [{ev.success.low:.2f}, {ev.success.high:.2f}]",
+              flush=True)  # fmt: skip
+    return results
 
 
 def main() -> None:
@@ -36,24 +60,26 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=200)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--evaluate", type=Path, help="a finished Gripper run to evaluate (nothing is trained)")
     args = ap.parse_args()
-    bank = args.bank if Path(args.bank).is_file() else ap.error(f"--bank {args.bank}: no such file")
-    parent = _skill_dir("gripper", None)
-    manifest = SkillLibrary(parent.parent).manifest("gripper")
+    bank = Path(args.bank) if Path(args.bank).is_file() else ap.error(f"--bank {args.bank}: no such file")
+    if (args.out / "results.json").exists():
+        ap.error(f"{args.out / 'results.json'} exists; choose another --out")
+    if args.evaluate is not None:
+        if not checkpoint_exists(args.evaluate / "checkpoint"):
+            ap.error(f"--evaluate {args.evaluate}: no checkpoint there")
+        results = evaluate_gripper(args.evaluate, bank, args.episodes, str(args.evaluate))
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "results.json").write_text(json.dumps(results, indent=2))
+        return
+    library = locate_skill("gripper", search_roots())
+    parent, manifest = library.root / "gripper", library.manifest("gripper")
     dc = DaggerConfig(manager_run="-", skill="gripper", name="gripper-variant", skill_steps=args.steps, workers=args.workers)
-    cfg = skill_config(manifest, Path(bank).resolve(), dc, str(parent.resolve()))
+    cfg = skill_config(manifest, bank.resolve(), dc, str(parent.resolve()))
     cfg = dataclasses.replace(cfg, task_kwargs={**cfg.task_kwargs, **VARIANTS[args.variant]})
     run = args.out / "skill"
     train_with_progress(cfg, run, checkpoint_exists(run / "checkpoint"), Console(stderr=True), f"gripper {args.variant}")
-    results = {}
-    for label, fraction in (("handover", 1.0), ("own", 0.0)):
-        ev = evaluate_run(
-            run, episodes=args.episodes, task_kwargs={"starts": str(Path(bank).resolve()), "starts_fraction": fraction}
-        )
-        assert ev.success is not None
-        results[label] = [ev.success.mean, ev.success.low, ev.success.high]
-        print(f"{args.variant}, {args.steps:,} steps, from {label} starts: success {ev.success.mean:.2f} "
-              f"[{ev.success.low:.2f}, {ev.success.high:.2f}]")  # fmt: skip
+    results = evaluate_gripper(run, bank, args.episodes, f"{args.variant}, {args.steps:,} steps")
     (args.out / "results.json").write_text(json.dumps(results, indent=2))
 
 

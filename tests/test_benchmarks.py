@@ -60,3 +60,12 @@ def test_gripper_variants_retrains_the_shipped_gripper_and_reports_both_start_se
     config = __import__("json").loads((tmp_path / "v" / "skill" / "config.json").read_text())
     assert config["task_kwargs"]["distance"] == "axis" and config["task_kwargs"]["push_coeff"] == 10.0
     assert config["init_from"].endswith("gripper")
+    assert "from paper_default starts: success" in out.stdout
+    # --evaluate: a finished run of any recipe, nothing trained; an existing results.json is never replaced.
+    out = _run("gripper_variants.py", f"--bank {tmp_path / 'bank.npz'} --episodes 1 --evaluate {tmp_path / 'v' / 'skill'} "
+               f"--out {tmp_path / 'e'}", tmp_path)  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert set(__import__("json").loads((tmp_path / "e" / "results.json").read_text())) == {"handover", "own", "paper_default"}
+    again = _run("gripper_variants.py", f"--bank {tmp_path / 'bank.npz'} --evaluate {tmp_path / 'v' / 'skill'} "
+                 f"--out {tmp_path / 'e'}", tmp_path)  # fmt: skip
+    assert again.returncode == 2 and "exists" in again.stderr

@@ -1,5 +1,7 @@
 """`hrlp train` on any Gymnasium environment with a Box, Discrete or parameterised Tuple action space."""
 
+import math
+
 import pytest
 from typer.testing import CliRunner
 
@@ -11,8 +13,9 @@ from hrlp.train import TrainConfig, load_trained, train
 
 def test_hierarchical_trpo_learns_a_parameterised_bandit(tmp_path):
     # Optimal: arm 0 with its parameter copying x (reward 1 per step); arm 1 pays 0.5; random play about 0.1.
+    # The parameter is acted in [-1, 1] mapped onto its Box(-2, 2) (hrlp.envs.actions): std 0.5 there is std 1 natively.
     cfg = TrainConfig(task="hrlp_test/PickAndPoint-v0", steps=24_000, batch_steps=2_000, num_envs=8,
-                      trpo=TRPOConfig(max_kl=0.05))  # fmt: skip
+                      init_log_std=math.log(0.5), trpo=TRPOConfig(max_kl=0.05))  # fmt: skip
     stats = list(train(cfg, tmp_path / "run"))
     per_step = [s["return_mean"] / 8 for s in stats]
     assert per_step[0] < 0.4 and per_step[-1] > 0.8, per_step

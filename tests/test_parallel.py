@@ -1,6 +1,11 @@
 """Sampling in worker processes: same batch layout as in-process sampling, exact resume, errors surface."""
 
 import functools
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -53,3 +58,44 @@ def test_a_failing_worker_raises_its_error():
         ParallelSampler([bad] * 2, GaussianPolicy(27, 9), RunningNormalizer(27), workers=2)
     with pytest.raises(ValueError, match="workers"):
         TrainConfig(task="Reacher", num_envs=2, workers=3)
+
+
+_ORPHAN_SCRIPT = """
+import functools, os, signal, sys
+from hrlp.envs import make
+from hrlp.policies.mlp import GaussianPolicy
+from hrlp.policies.normalizer import RunningNormalizer
+from hrlp.rollout import ParallelSampler
+sampler = ParallelSampler([functools.partial(make, "Reacher", episode_steps=20)] * 2, GaussianPolicy(27, 9),
+                          RunningNormalizer(27), workers=2)
+sampler.request(10_000_000)  # minutes of sampling: the workers are busy when this process dies
+open(sys.argv[1], "w").write(" ".join(str(p.pid) for p in sampler._procs))
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_workers_die_with_a_killed_trainer(tmp_path):
+    # A trainer killed with SIGKILL in the middle of a batch used to leave its workers sampling until the batch ended.
+    pid_file = tmp_path / "pids"
+    with open(tmp_path / "stderr", "w") as err:  # a file, not a pipe: orphans holding a pipe would stall the test
+        out = subprocess.run([sys.executable, "-c", _ORPHAN_SCRIPT, str(pid_file)], stdout=subprocess.DEVNULL,
+                             stderr=err, timeout=120)  # fmt: skip
+    assert out.returncode == -signal.SIGKILL, (tmp_path / "stderr").read_text()
+    pids = [int(p) for p in pid_file.read_text().split()]
+    assert len(pids) == 2
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(_alive(p) for p in pids):
+        time.sleep(0.1)
+    alive = [p for p in pids if _alive(p)]
+    for p in alive:
+        os.kill(p, signal.SIGKILL)
+    assert not alive, f"workers {alive} outlived their killed trainer"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"  # a zombie has exited
+    except FileNotFoundError:
+        return False

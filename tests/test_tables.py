@@ -15,6 +15,8 @@ from hrlp.experiments.tables import (
     censored_median,
     format_steps,
     grid_lines,
+    iqm_cell,
+    iqm_interval,
     run_crossings,
     sample_efficiency_lines,
     smoothed_rate,
@@ -240,3 +242,52 @@ def test_figure_7_presets_get_the_grid_layout(tmp_path):
     md = (out / "reach-and-grip-2-tuned.md").read_text()
     assert "| | c2=3, tr=0.06 | c2=3, tr=0.03 |" in md
     assert "| gripper+micro | 0.875 (0.74) |  |" in md and "| gripper+reacher |  | 0.25 (0.17) |" in md
+
+
+def test_iqm_is_the_mean_of_the_middle_half_with_a_seeded_bootstrap_interval():
+    m, lo, hi = iqm_interval([8, 1, 7, 2, 6, 3, 5, 4])  # sorted 1..8: the middle half 3, 4, 5, 6
+    assert m == 4.5 and 1 <= lo < m < hi <= 8
+    assert iqm_interval(list(range(1, 9))) == (m, lo, hi)  # the same values, the same interval: tables are reproducible
+    assert iqm_interval([1, 2, 3, 100])[0] == 2.5  # an outlier seed is cut, unlike in the mean (26.5)
+    assert iqm_interval([0.1, 0.2, 0.4])[0] == pytest.approx(0.7 / 3)  # fewer than 4 seeds: nothing cut, the mean
+    assert iqm_interval([0.4, 0.4, 0.4, 0.4]) == (0.4, 0.4, 0.4)  # all equal: a zero-width interval
+    assert iqm_interval([0.3]) == (0.3, 0.3, 0.3)  # one seed: the value, a zero-width interval
+    assert all(math.isnan(v) for v in iqm_interval([]))
+    m, lo, hi = iqm_interval([0.0, 1.0])
+    assert (m, lo, hi) == (0.5, 0.0, 1.0)  # resamples of two seeds: both 0, mixed, both 1
+    assert iqm_cell([0.3]) == "0.3" and iqm_cell([]) == "-" and iqm_cell([1, 2, 3, 100]).startswith("2.5 [")
+
+
+def test_tables_show_the_iqm_beside_the_mean(tmp_path):
+    root, out = tmp_path / "runs", tmp_path / "results"
+    for seed, success in enumerate((0.1, 0.2, 0.3, 0.9)):  # mean 0.375, IQM 0.25
+        _write_run(root, "reachers", "Reacher", seed, success, [0.1, 0.2])
+    _write_run(root, "reachers", "ReacherStabilised", 0, 0.5, [0.1, 0.2])  # one seed: its own Wilson interval, one IQM
+    build_tables(root, out)
+    md = (out / "reachers.md").read_text()
+    assert "| run | seeds | ours | IQM | paper |" in md and "interquartile mean" in md
+    _, lo, hi = iqm_interval([0.1, 0.2, 0.3, 0.9])
+    assert lo < 0.25 < hi
+    row = next(line for line in md.splitlines() if line.startswith("| Reacher |"))
+    assert row.startswith("| Reacher | 4 | 0.375 [") and f"] | 0.25 [{lo:.3g}, {hi:.3g}] | " in row
+    assert next(line for line in md.splitlines() if line.startswith("| ReacherStabilised |")).startswith(
+        "| ReacherStabilised | 1 | 0.5 [0.4, 0.6] | 0.5 | "
+    )
+
+
+def test_iqm_of_real_tiny_runs_and_tables_rebuilt_byte_for_byte(tmp_path):
+    from hrlp.experiments.presets import Preset, Run
+    from hrlp.experiments.runner import reproduce
+    from hrlp.train import TrainConfig
+
+    cfg = TrainConfig(task="Reacher", batch_steps=16, num_envs=2, episode_steps=8)
+    preset = Preset("tiny-iqm", "a Reacher", "test", (Run("normal", cfg),), seeds=(0, 1, 2, 3), budget=16, eval_episodes=3)
+    results = reproduce(preset, tmp_path, workers=1)
+    out = tmp_path / "results"
+    build_tables(tmp_path, out)
+    first = (out / "tiny-iqm.md").read_bytes()
+    row = next(line for line in first.decode().splitlines() if line.startswith("| normal |"))
+    values = [r["success"]["mean"] for r in sorted(results, key=lambda r: r["seed"])]
+    assert row.split(" | ")[3] == iqm_cell(values)
+    build_tables(tmp_path, out)  # unchanged runs: the same bytes, the bootstrap included
+    assert (out / "tiny-iqm.md").read_bytes() == first

@@ -241,7 +241,7 @@ def test_resume_reproduces_an_uninterrupted_run_exactly(tmp_path):
 def test_resume_refuses_other_settings_and_fresh_runs_refuse_to_overwrite(tmp_path):
     cfg = TrainConfig(task="Reacher", **TINY)
     list(train(cfg, tmp_path))
-    with pytest.raises(ValueError, match="only --steps may change"):
+    with pytest.raises(ValueError, match="only --steps and --episodes may change"):
         list(train(dataclasses.replace(cfg, seed=9), tmp_path, resume=True))
     with pytest.raises(ValueError, match="already holds a run"):
         list(train(cfg, tmp_path))
@@ -274,4 +274,5 @@ def test_reproduce_jobs_report_a_line_per_iteration(tmp_path, capfd):
               eval_episodes=1)  # fmt: skip
     run_job(job)
     err = capfd.readouterr().err.splitlines()
-    assert [line.split(",")[0] for line in err] == ["p / normal / seed 0: iteration 1", "p / normal / seed 0: iteration 2"]
+    assert [line.split(",")[0] for line in err] == ["p / normal / seed 0: iteration 1", "p / normal / seed 0: iteration 2",
+                                                    "eval p / normal / seed 0: 1/1 episodes (100%)"]  # fmt: skip

@@ -43,6 +43,8 @@ WHY_STATES = "the hand-over states are collected one decision at a time and held
 RAY_CONNECT_TIMEOUT_S = 5.0
 """Seconds to wait for a Ray cluster's address to accept a connection before giving up (Ray itself retries for
 minutes)."""
+RAY_HANDSHAKE_TIMEOUT_S = 1.5
+"""Seconds a server at ``--address`` has to answer as a gRPC server does (Ray's answers in milliseconds)."""
 
 
 def cores() -> int:
@@ -114,17 +116,36 @@ def duration_problem(what: str, steps: int | None, episode: int) -> str | None:
 
 def ray_address_problem(address: str, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> str | None:
     """Why the Ray cluster ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``; ``auto`` and ``local`` are Ray's own and
-    not checked here) cannot be used, or None when something accepts a connection there within ``timeout_s``."""
+    not checked here) cannot be used, or None when a gRPC server (Ray's GCS or client server) accepts a connection there
+    within ``timeout_s`` and answers HTTP/2's preface within :data:`RAY_HANDSHAKE_TIMEOUT_S`."""
     if address in ("auto", "local"):
         return None
     hostport = address.removeprefix("ray://")
     host, sep, port = hostport.rpartition(":")
     if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
         return f"--address must be HOST:PORT (or ray://HOST:PORT, auto, local), got {address!r}"
+    hint = "start one there with 'ray start --head', or leave --address out to start a local Ray"
     try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
-            return None
+        conn = socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s)
     except OSError as e:
         reason = "no answer" if isinstance(e, TimeoutError) else (e.strerror or str(e))
-        return (f"cannot reach a Ray cluster at {address}: {reason} (within {timeout_s:g} s); start one there with "
-                "'ray start --head', or leave --address out to start a local Ray")  # fmt: skip
+        return f"cannot reach a Ray cluster at {address}: {reason} (within {timeout_s:g} s); {hint}"
+    # Ray's GCS and client server speak gRPC: HTTP/2, which answers the client preface with a SETTINGS frame (a 9-byte
+    # header whose 4th byte is its type, 4). Anything else listening there is not a Ray cluster.
+    header = b""
+    with conn:
+        try:
+            conn.settimeout(min(timeout_s, RAY_HANDSHAKE_TIMEOUT_S))
+            conn.sendall(_HTTP2_PREFACE)
+            while len(header) < 9 and (chunk := conn.recv(9 - len(header))):
+                header += chunk
+        except OSError:  # no answer within timeout_s, or the connection dropped
+            pass
+    if len(header) == 9 and header[3] == 4:
+        return None
+    answer = f"it answered {header!r}" if header else f"no answer within {min(timeout_s, RAY_HANDSHAKE_TIMEOUT_S):g} s"
+    return f"{address} is not a Ray cluster: what listens there does not speak gRPC ({answer}); {hint}"
+
+
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+"""HTTP/2's client connection preface followed by an empty SETTINGS frame."""

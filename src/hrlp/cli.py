@@ -393,6 +393,40 @@ _VALUE_FRACTION = Annotated[
 _FISHER_FRACTION = Annotated[
     float, typer.Option(help="Share of the batch the Fisher-vector products use (TRPO paper: 0.1; 1: exact, the default).")
 ]
+_EPISODES = Annotated[
+    int | None,
+    typer.Option(
+        help="Training episodes in total: the run stops at --steps or --episodes, whichever comes first (default: no "
+        "episode budget).",
+        callback=check.count(1, bounds.MAX_STEPS, bounds.WHY_STEPS, "number of episodes"),
+    ),
+]
+_REWARD_SCALE = Annotated[
+    float,
+    typer.Option(
+        help="Factor on the rewards for training only (advantages, baseline); logs and 'hrlp eval' keep the task's units.",
+        callback=check.real(0.0, low_open=True),
+    ),
+]
+_ENTROPY_COEF = Annotated[
+    float, typer.Option(help="Weight of the entropy bonus in TRPO's surrogate (TRPO as published: 0).", callback=check.real())
+]
+_GAE_LAMBDA = Annotated[
+    float, typer.Option(help="GAE's lambda (modular_rl's runs: 0.97; 1: Monte-Carlo returns).", callback=check.real(0.0, 1.0))
+]
+_CG_ITERS = Annotated[
+    int,
+    typer.Option(
+        help="Conjugate-gradient iterations of TRPO's natural-gradient step (modular_rl: 10).",
+        callback=check.count(1, 1000, "each iteration is a Fisher-vector product over the batch"),
+    ),
+]
+_CG_DAMPING = Annotated[
+    float,
+    typer.Option(
+        help="Damping added to the Fisher matrix in conjugate gradient (modular_rl's runs: 0.1).", callback=check.real(0.0)
+    ),
+]
 _RESUME = Annotated[
     bool, typer.Option(help="Continue the run in --run-dir from its last checkpoint with its own settings (--steps may grow).")
 ]
@@ -401,7 +435,10 @@ _RESUME = Annotated[
 @app.command()
 def train(
     ctx: typer.Context,
-    task: Annotated[str, typer.Argument(help="hrlp task (see 'hrlp tasks') or a Gymnasium id.")],
+    task: Annotated[
+        str,
+        typer.Argument(help="hrlp task (see 'hrlp tasks'), a Gymnasium id, or MODULE:ID (the module registers the id)."),
+    ],
     steps: _STEPS = None,
     seed: _SEED = 0,
     run_dir: _RUN_DIR = None,
@@ -418,17 +455,23 @@ def train(
     value_iters: _VALUE_ITERS = 25,
     value_fraction: _VALUE_FRACTION = 1.0,
     workers: _WORKERS = 1,
+    episodes: _EPISODES = None,
+    reward_scale: _REWARD_SCALE = 1.0,
+    entropy_coef: _ENTROPY_COEF = 0.0,
+    gae_lambda: _GAE_LAMBDA = 0.97,
+    cg_iters: _CG_ITERS = 10,
+    cg_damping: _CG_DAMPING = 0.1,
     resume: _RESUME = False,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
     if not resume:  # before torch is imported: the task, its arguments and spaces (a resume uses the run's own)
+        batch_steps, max_kl, note = _episode_length_defaults(ctx, task, batch_steps, max_kl)
         _check_numbers(ctx)
         _check_task(task, episode_steps, task_arg, ctx)
-    settings = dict(task=task, steps=_DEFAULT_STEPS if steps is None else steps, seed=seed, batch_steps=batch_steps,
-                    num_envs=num_envs, episode_steps=episode_steps, init_log_std=init_log_std, workers=workers,
-                    value_iters=value_iters, value_fraction=value_fraction)  # fmt: skip
-    _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps,
-           ctx)  # fmt: skip
+        if note:  # after the checks: an error stays the one line
+            err_console.print(note, soft_wrap=True, highlight=False)
+    settings, trpo = _run_settings({**ctx.params, "batch_steps": batch_steps, "max_kl": max_kl})
+    _train(settings, task_arg, trpo, run_dir, resume, steps, ctx)
 
 
 @app.command("train-manager")
@@ -480,6 +523,12 @@ def train_manager(
     value_iters: _VALUE_ITERS = 25,
     value_fraction: _VALUE_FRACTION = 1.0,
     workers: _WORKERS = 1,
+    episodes: _EPISODES = None,
+    reward_scale: _REWARD_SCALE = 1.0,
+    entropy_coef: _ENTROPY_COEF = 0.0,
+    gae_lambda: _GAE_LAMBDA = 0.97,
+    cg_iters: _CG_ITERS = 10,
+    cg_damping: _CG_DAMPING = 0.1,
     resume: _RESUME = False,
 ) -> None:
     """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration."""
@@ -503,11 +552,34 @@ def train_manager(
         if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
             raise
         spec = None
-    settings = dict(task=task, steps=_DEFAULT_STEPS if steps is None else steps, seed=seed, batch_steps=batch_steps,
-                    num_envs=num_envs, episode_steps=episode_steps, init_log_std=init_log_std, workers=workers, macro=spec,
-                    value_iters=value_iters, value_fraction=value_fraction)  # fmt: skip
-    _train(settings, task_arg, dict(max_kl=max_kl, gamma=gamma, fisher_fraction=fisher_fraction), run_dir, resume, steps,
-           ctx)  # fmt: skip
+    settings, trpo = _run_settings({**ctx.params, "macro": spec})
+    _train(settings, task_arg, trpo, run_dir, resume, steps, ctx)
+
+
+_RUN_SETTINGS = (
+    "task",
+    "seed",
+    "batch_steps",
+    "num_envs",
+    "episode_steps",
+    "init_log_std",
+    "workers",
+    "value_iters",
+    "value_fraction",
+    "episodes",
+    "reward_scale",
+    "macro",
+)
+"""Options of ``train``/``train-manager`` that are settings of the run (``TrainConfig``'s, the value fit's two)."""
+_TRPO_SETTINGS = ("max_kl", "gamma", "fisher_fraction", "entropy_coef", "gae_lambda", "cg_iters", "cg_damping")
+"""Options of ``train``/``train-manager`` that are ``TRPOConfig``'s fields, named as they are."""
+
+
+def _run_settings(params: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The run's settings and TRPO's from the command's parsed options (``--steps`` left out: the default)."""
+    settings = {name: params[name] for name in _RUN_SETTINGS if name in params}
+    settings["steps"] = _DEFAULT_STEPS if params.get("steps") is None else params["steps"]
+    return settings, {name: params[name] for name in _TRPO_SETTINGS}
 
 
 def parse_task_args(items: list[str] | None) -> dict[str, Any]:
@@ -544,7 +616,7 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
     from hrlp.train import TrainConfig, env_factory, train_with_progress
 
     task = settings["task"]
-    out = run_dir or Path("runs") / f"{task.replace('/', '_')}-s{settings['seed']}"
+    out = run_dir or Path("runs") / f"{task.replace('/', '_').replace(':', '_')}-s{settings['seed']}"
     manager_command = settings.get("macro") is not None or (ctx is not None and ctx.info_name == "train-manager")
     try:
         if steps is not None and steps <= 0:
@@ -567,8 +639,10 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
             differences = _resume_differences(saved, ctx)
             if differences:
                 raise ValueError(f"--resume: {out} was trained with other settings: {', '.join(differences)}; only --steps "
-                                 "may change (leave the other options out to continue with the run's own)")  # fmt: skip
-            cfg = dataclasses.replace(saved, steps=saved.steps if steps is None else steps)
+                                 "and --episodes may change (leave the other options out to continue with the run's "
+                                 "own)")  # fmt: skip
+            episodes = settings.get("episodes") if ctx is not None and _given(ctx, "episodes") else saved.episodes
+            cfg = dataclasses.replace(saved, steps=saved.steps if steps is None else steps, episodes=episodes)
         else:
             if checkpoint_exists(out / "checkpoint"):
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
@@ -588,6 +662,35 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
     console.print(summary.line(), soft_wrap=True)
     console.print(f"run written to {out} (checkpoint: {out / 'checkpoint'}, logs: progress.csv, tb/)")
     return out
+
+
+def _episode_length_defaults(ctx: typer.Context, task: str, batch_steps: int, max_kl: float) -> tuple[int, float, str]:
+    """``(batch_steps, max_kl, note)``: as given, or for a Gymnasium environment whose registration declares episodes of
+    at most :data:`~hrlp.envs.check.SHORT_EPISODE_STEPS` decisions (``max_episode_steps``), the short-episode settings
+    for the options left out, with the note that says so ("" when none). The defaults suit 300-step episodes: on
+    1-10-decision episodes a 50,000-decision batch is a whole 20,000-episode budget. hrlp's own arm tasks keep the
+    paper's settings whatever ``--episode-steps``."""
+    from hrlp.envs import TASKS
+    from hrlp.envs.check import SHORT_EPISODE_SETTINGS, SHORT_EPISODE_STEPS, declared_episode_steps
+
+    given = {name: _given(ctx, name) for name in SHORT_EPISODE_SETTINGS}
+    if all(given.values()) or task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
+        return batch_steps, max_kl, ""
+    try:
+        length = declared_episode_steps(task)
+    except ValueError:
+        return batch_steps, max_kl, ""  # an unknown task: _check_task says so
+    if length is None or length > SHORT_EPISODE_STEPS:
+        return batch_steps, max_kl, ""
+    short = SHORT_EPISODE_SETTINGS
+    chosen = {"batch_steps": batch_steps if given["batch_steps"] else short["batch_steps"],
+              "max_kl": max_kl if given["max_kl"] else short["max_kl"]}  # fmt: skip
+    ctx.params.update(chosen)
+    shown = " ".join(f"--{n.replace('_', '-')} {chosen[n]:g}" for n in short if not given[n])
+    plural = "s" if length != 1 else ""
+    note = (f"note: {task}'s episodes last at most {length:,} decision{plural}: short-episode settings {shown} (give the "
+            "options to choose others; docs/training.md)")  # fmt: skip
+    return int(chosen["batch_steps"]), float(chosen["max_kl"]), note
 
 
 def _check_numbers(ctx: typer.Context) -> None:
@@ -640,7 +743,8 @@ def _os_error_line(error: OSError, where: Path) -> str:
 
 
 #: Options of ``train``/``train-manager`` that locate or drive the run rather than define it (not compared on --resume).
-_RUN_OPTIONS = frozenset({"ctx", "run_dir", "resume", "steps"})
+_RUN_OPTIONS = frozenset({"ctx", "run_dir", "resume", "steps", "episodes"})
+"""Options a resume may give freely: where the run is, and its budgets."""
 
 
 def _resume_differences(saved: Any, ctx: typer.Context | None) -> list[str]:
@@ -776,7 +880,8 @@ def _task_args_accessor() -> tuple[Any, Any]:
 _RESUME_ACCESSORS: dict[str, tuple[Any, Any]] = {
     "task": _task_accessor(),
     **{name: _replace_top(name) for name in ("seed", "batch_steps", "num_envs", "episode_steps", "init_log_std", "workers")},
-    **{name: _replace_trpo(name) for name in ("max_kl", "gamma", "fisher_fraction")},
+    **{name: _replace_top(name) for name in ("episodes", "reward_scale")},
+    **{name: _replace_trpo(name) for name in _TRPO_SETTINGS},
     "value_iters": _value_accessor("max_iter"),
     "value_fraction": _value_accessor("fraction"),
     "task_arg": _task_args_accessor(),
@@ -798,12 +903,16 @@ def eval_(
     seed: Annotated[int, typer.Option(help="Seed of the evaluation episodes.", callback=check.seed())] = 10_000,
     stochastic: Annotated[bool, typer.Option(help="Sample actions instead of taking the mean.")] = False,
 ) -> None:
-    """Mean return and success rate of a trained policy, with 95% confidence intervals."""
+    """Mean return and success rate of a trained policy, with 95% confidence intervals.
+
+    Progress goes to stderr: a bar in a terminal; written to a file or a pipe, a line every tenth of the episodes (at
+    least every 10 s) with the running return and success rate."""
     from hrlp.atomic import StorageError
-    from hrlp.evaluate import evaluate_run
+    from hrlp.evaluate import evaluate_with_progress
 
     try:  # errors end as one line from the top-level handler (_OneLineErrors)
-        ev = evaluate_run(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic)
+        ev = evaluate_with_progress(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic,
+                                    console=err_console, description=f"eval {run_dir}")  # fmt: skip
     except StorageError:
         raise
     except OSError as e:
@@ -826,7 +935,8 @@ def eval_(
 skills_app = typer.Typer(help="The skill library: frozen, parameterised skills for the Manager.", no_args_is_help=True)
 app.add_typer(skills_app, name="skills")
 _LIBRARY = Annotated[
-    Path | None, typer.Option("--library", help="Library directory (default $HRLP_SKILLS or ~/.hrlp/skills).")
+    Path | None,
+    typer.Option("--library", help="Library directory (default $HRLP_SKILLS or ~/.hrlp/skills).", callback=check.library),
 ]
 
 
@@ -840,6 +950,8 @@ def skills_list(library: _LIBRARY = None) -> None:
     from hrlp.skills import SkillLibrary, shipped_library_root
 
     lib, shipped = SkillLibrary(library), SkillLibrary(shipped_library_root())
+    if not lib.root.is_dir():
+        err_console.print(f"note: no library at {escape(str(lib.root))} yet ('hrlp skills add' makes it): shipped skills only")
     table = Table(title=escape(f"skills in {lib.root} and shipped with hrlp"))
     for col in ("name", "task", "params", "k", "trained steps", "sha256", "from"):
         table.add_column(col)
@@ -900,11 +1012,15 @@ def skills_add(
 
 @skills_app.command("build")
 def skills_build(
-    library: Annotated[Path, typer.Option(help="Library the skills are added to.")],
-    out: Annotated[Path, typer.Option(help="Root of the training runs (as 'hrlp reproduce --out').")] = Path("runs/reproduce"),
+    library: Annotated[Path, typer.Option(help="Library the skills are added to.", callback=check.library)],
+    out: Annotated[
+        Path, typer.Option(help="Root of the training runs (as 'hrlp reproduce --out').", callback=check.out_dir)
+    ] = Path("runs/reproduce"),
     only: Annotated[str, typer.Option(help="Comma-separated skills to build (default: all of them).")] = "",
-    budget: Annotated[int | None, typer.Option(help="Environment steps per skill (default: each recipe's own).")] = None,
-    workers: Annotated[int, typer.Option(help="Runs at once.")] = 2,
+    budget: Annotated[
+        int | None, typer.Option(help="Environment steps per skill (default: each recipe's own).", callback=_STEPS_CHECK)
+    ] = None,
+    workers: Annotated[int, typer.Option(help="Runs at once.", callback=check.workers())] = 2,
     overwrite: Annotated[bool, typer.Option(help="Replace skills of the same names in the library.")] = False,
 ) -> None:
     """Train the shipped skills from their recipes (the 'shipped-skills' preset) and add them to LIBRARY."""

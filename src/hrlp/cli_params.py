@@ -83,6 +83,13 @@ def out_dir(param: typer.CallbackParam, value: Path | None) -> Path | None:
     return value
 
 
+def library(param: typer.CallbackParam, value: Path | None) -> Path | None:
+    """A skill library: a directory, or a path where one may be made (nothing above it a file); a file is refused."""
+    if value is not None and (value.exists() or value.is_symlink()) and not value.is_dir():
+        raise BoundError(f"{_flag(param)} {value} is a file, not a skill library (a directory)")
+    return out_dir(param, value)
+
+
 def run_dir(param: typer.CallbackParam, value: Path | None) -> Path | None:
     """An existing run directory to read."""
     if value is None:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -87,12 +89,68 @@ class MoveStats:
     """TargetDistSum minus the untouched one: 0 for a capsule never moved, > 0 for one moved towards the target."""
 
 
+@dataclass(frozen=True)
+class EvalProgress:
+    """How far an evaluation has got: what :func:`evaluate_run` passes to ``on_progress`` after each episode."""
+
+    done: int
+    """Episodes finished."""
+    total: int
+    """Episodes asked for."""
+    return_mean: float
+    """Mean return of the episodes finished so far."""
+    success_rate: float | None
+    """Success rate of the episodes finished so far (None for tasks without a success flag)."""
+    target_dist_sum: float | None = None
+    """Mean TargetDistSum so far, for tasks that report it."""
+
+
+def progress_line(label: str, p: EvalProgress, elapsed_s: float) -> str:
+    """One line for an evaluation's progress, in the style of :func:`hrlp.train.progress_line`, e.g. ``eval runs/x:
+    100/1,000 episodes (10%), return -40.2, success 0.12, 3.1 episodes/s, 32 s``."""
+    out = f"{label}: {p.done:,}/{p.total:,} episodes ({p.done / max(p.total, 1):.0%}), return {p.return_mean:.1f}"
+    if p.success_rate is not None:
+        out += f", success {p.success_rate:.2f}"
+    if p.target_dist_sum is not None:
+        out += f", TargetDistSum {p.target_dist_sum:.1f}"
+    return out + f", {p.done / max(elapsed_s, 1e-9):.1f} episodes/s, {elapsed_s:.0f} s"
+
+
+class ProgressLines:
+    """An ``on_progress`` callback for :func:`evaluate_run` that writes a :func:`progress_line` every ``every`` episodes
+    (default: every tenth of the total), whenever ``interval_s`` seconds passed since the last line, and after the
+    last episode: readable where a progress bar is not, such as stderr written to a file.
+
+    Args:
+        label: what the lines start with, e.g. ``eval RUN_DIR``.
+        write: where a line goes, e.g. ``lambda line: print(line, file=sys.stderr, flush=True)``.
+        every: episodes between lines; None: ``ceil(total / 10)``; 0: no lines by count.
+        interval_s: seconds after which the next episode writes a line whatever the count; None: never by time.
+    """
+
+    def __init__(self, label: str, write: Callable[[str], None], every: int | None = None,
+                 interval_s: float | None = 10.0) -> None:  # fmt: skip
+        self.label, self.write, self.every, self.interval_s = label, write, every, interval_s
+        self._start = self._last = time.perf_counter()
+
+    def __call__(self, p: EvalProgress) -> None:
+        now = time.perf_counter()
+        every = math.ceil(p.total / 10) if self.every is None else self.every
+        due = p.done >= p.total or (every > 0 and p.done % every == 0)
+        if due or (self.interval_s is not None and now - self._last >= self.interval_s):
+            self.write(progress_line(self.label, p, now - self._start))
+            self._last = now
+
+
 def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, deterministic: bool = True,
-                 task_kwargs: dict[str, Any] | None = None) -> Evaluation:  # fmt: skip
+                 task_kwargs: dict[str, Any] | None = None,
+                 on_progress: Callable[[EvalProgress], None] | None = None) -> Evaluation:  # fmt: skip
     """Run ``episodes`` episodes of the run's policy (normaliser frozen) and summarise them (``task_kwargs`` override
     the run's task arguments, e.g. to evaluate a skill from another start set).
 
     Returns count the task's own rewards, undiscounted, over low-level steps, for flat policies and Managers alike.
+    ``on_progress``, if given, is called after every episode with the running :class:`EvalProgress` (the last call
+    has ``done == episodes``); :class:`ProgressLines` turns those calls into log lines.
     """
     from hrlp.train import load_trained
 
@@ -120,6 +178,8 @@ def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, determin
         if tds is not None and "closest_max" in info:
             moves.append((-float(info["closest_max"]), float(info["lift_max"]), -length * start_gap))
         done_eps.append(Episode(ret, length, None if s is None else bool(s), None if tds is None else float(tds)))
+        if on_progress is not None:
+            on_progress(_running(done_eps, episodes))
     names = getattr(env, "names", None)
     env.close()
     succ = [e.success for e in done_eps if e.success is not None]
@@ -132,6 +192,47 @@ def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, determin
         target_dist_sum=mean_interval(tds) if tds else None,
         macro_usage={n: usage[n] / total for n in names} if names and total else None,
         move=_move_stats(moves, tds) if moves and len(moves) == len(tds) else None,
+    )
+
+
+def evaluate_with_progress(run_dir: Path, episodes: int = 20, seed: int = 10_000, deterministic: bool = True,
+                           console: Any = None, description: str | None = None) -> Evaluation:  # fmt: skip
+    """:func:`evaluate_run` behind a rich progress bar on ``console`` (default: stderr) with the running return and
+    success rate, as :func:`hrlp.train.train_with_progress` shows training; when ``console`` is not a terminal (stderr
+    written to a file or a pipe), :class:`ProgressLines` instead: a line every tenth of the episodes, at least every
+    10 s, and at the end."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    console = console or Console(stderr=True)
+    label = description or f"eval {run_dir}"
+    if not console.is_terminal:
+        lines = ProgressLines(label, lambda line: console.print(line, soft_wrap=True, markup=False, highlight=False))
+        return evaluate_run(run_dir, episodes, seed, deterministic, on_progress=lines)
+    columns = [TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+               TextColumn("{task.fields[status]}", markup=False)]  # fmt: skip
+    with Progress(*columns, console=console) as progress:
+        bar = None  # added after the first episode: an error loading the run leaves its one line, no empty bar
+
+        def show(p: EvalProgress) -> None:
+            nonlocal bar
+            if bar is None:
+                bar = progress.add_task(label, total=p.total, status="")
+            status = f"return {p.return_mean:.1f}" + ("" if p.success_rate is None else f", success {p.success_rate:.2f}")
+            progress.update(bar, completed=p.done, status=status)
+
+        return evaluate_run(run_dir, episodes, seed, deterministic, on_progress=show)
+
+
+def _running(done_eps: list[Episode], total: int) -> EvalProgress:
+    succ = [e.success for e in done_eps if e.success is not None]
+    tds = [e.target_dist_sum for e in done_eps if e.target_dist_sum is not None]
+    return EvalProgress(
+        done=len(done_eps),
+        total=total,
+        return_mean=sum(e.ret for e in done_eps) / len(done_eps),
+        success_rate=sum(succ) / len(succ) if succ else None,
+        target_dist_sum=sum(tds) / len(tds) if tds else None,
     )
 
 

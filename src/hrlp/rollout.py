@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -334,7 +336,8 @@ class ParallelSampler:
         for w in range(workers):
             parent, child = ctx.Pipe()
             chunk = list(env_fns[bounds[w] : bounds[w + 1]])
-            args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w, int(bounds[w]))
+            args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w, int(bounds[w]),
+                    os.getpid())  # fmt: skip
             proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
             proc.start()
             child.close()
@@ -423,9 +426,28 @@ def _receive(conn: Any) -> Any:
     return payload
 
 
+def _die_with_parent(parent_pid: int) -> None:
+    """Have the kernel kill this process when its parent dies (Linux ``PR_SET_PDEATHSIG``), so that a trainer killed
+    with SIGKILL leaves no sampling workers behind; elsewhere a worker ends at its next message (EOF on the pipe)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1: PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the request took effect
+        os._exit(0)
+
+
 def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict, env_seed: int, noise_seed: int,
-                    first_index: int = 0) -> None:  # fmt: skip
-    """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests."""
+                    first_index: int = 0, parent_pid: int | None = None) -> None:  # fmt: skip
+    """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests.
+
+    It dies with its parent (:func:`_die_with_parent`) and ends quietly when the parent's end of the pipe closes."""
+    if parent_pid is not None:
+        _die_with_parent(parent_pid)
     torch.set_num_threads(1)
     try:
         normalizer = RunningNormalizer.from_config({**norm_config, "frozen": True})
@@ -436,7 +458,11 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
         conn.send(("error", f"{type(e).__name__}: {e}"))
         return
     while True:
-        cmd, arg = conn.recv()
+        try:
+            cmd, arg = conn.recv()
+        except (EOFError, OSError):  # the parent is gone
+            sampler.close()
+            return
         try:
             if cmd == "close":
                 sampler.close()

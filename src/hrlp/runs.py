@@ -40,7 +40,8 @@ class RunInfo:
     eval_success: float | None
     """Greedy evaluation success of ``hrlp reproduce``'s ``result.json`` (None: not evaluated)."""
     state: str
-    """``running`` (a trainer holds the directory's lock), ``finished`` (steps >= budget) or ``stopped``."""
+    """``running`` (a trainer holds the directory's lock), ``finished`` (steps >= budget, or the episode budget spent)
+    or ``stopped``."""
     problem: str | None = None
     """Why a file could not be read (the other fields are then what could be read)."""
 
@@ -92,12 +93,13 @@ def read_run(directory: Path) -> RunInfo:
         budget = int(config["steps"])
     except (OSError, ValueError, KeyError, TypeError) as e:
         config, task, budget, problem = {}, "?", 0, f"config.json: {e}"
-    steps, train_success = 0, None
+    steps, train_success, episodes_done = 0, None, 0
     try:
         row = _last_row(directory / "progress.csv")
         if row is not None:
             steps = int(float(row.get("env_steps") or 0))
             train_success = _number(row.get("success_rate"))
+            episodes_done = int(float(row.get("episodes_total") or 0))
     except (OSError, ValueError, csv.Error) as e:
         problem = problem or f"progress.csv: {e}"
     eval_success = None
@@ -109,7 +111,9 @@ def read_run(directory: Path) -> RunInfo:
             steps = max(steps, int(found.get("env_steps", 0)))
         except (OSError, ValueError, AttributeError, TypeError) as e:
             problem = problem or f"result.json: {e}"
-    state = "running" if _locked(directory) else "finished" if budget and steps >= budget else "stopped"
+    episodes = config.get("episodes")  # an episode budget ends a run too (TrainConfig.episodes)
+    spent = (budget and steps >= budget) or (isinstance(episodes, int) and episodes_done >= episodes)
+    state = "running" if _locked(directory) else "finished" if spent else "stopped"
     return RunInfo(directory, task, steps, budget, train_success, eval_success, state, problem)
 
 

@@ -81,6 +81,12 @@ class TrainConfig:
     init_from: str | None = None
     """For a flat run: a skill (a name in the libraries a Manager searches, or a skill directory) whose policy and
     observation statistics the run starts from instead of a fresh network (DAgger retraining, ``hrlp dagger``)."""
+    episodes: int | None = None
+    """Training episodes in total (None: no episode budget). The run stops after the iteration in which ``steps`` or
+    ``episodes`` is reached, whichever comes first; an episode counts when it ends (terminated or truncated)."""
+    reward_scale: float = 1.0
+    """Factor on every reward before advantages and value targets are computed: training only. Logged returns,
+    success and evaluation (``hrlp eval``) stay in the task's own units."""
 
     def __post_init__(self) -> None:
         for name in ("steps", "batch_steps", "num_envs", "workers"):
@@ -97,6 +103,11 @@ class TrainConfig:
             raise ValueError(f"hidden must be positive layer widths, got {self.hidden!r}")
         if not (isinstance(self.init_log_std, int | float) and math.isfinite(self.init_log_std)):
             raise ValueError(f"init_log_std must be a finite number, got {self.init_log_std!r}")
+        if self.episodes is not None and (isinstance(self.episodes, bool) or not isinstance(self.episodes, int)
+                                          or self.episodes <= 0):  # fmt: skip
+            raise ValueError(f"episodes must be a positive integer (or None: no episode budget), got {self.episodes!r}")
+        if not (isinstance(self.reward_scale, int | float) and math.isfinite(self.reward_scale) and self.reward_scale > 0):
+            raise ValueError(f"reward_scale must be a positive finite number, got {self.reward_scale!r}")
         if not isinstance(self.task_kwargs, dict) or not all(isinstance(k, str) for k in self.task_kwargs):
             raise ValueError(f"task_kwargs must map argument names to values, got {self.task_kwargs!r}")
         self._check_bounds()
@@ -155,16 +166,19 @@ def env_factory(
     """A constructor for ``task`` (an hrlp task name/id or a Gymnasium id), wrapped in a :class:`MacroEnv` of
     ``macro``'s skills (loaded once, shared, frozen) for a Manager. Raises ValueError, one line, before any compute,
     for an unknown task, an unknown or invalid argument, a missing optional dependency, an unsupported space
-    (:func:`hrlp.envs.check.probe_task`) or a missing skill; for a Gymnasium id, ``episode_steps`` is its time limit.
+    (:func:`hrlp.envs.check.probe_task`) or a missing skill; for a Gymnasium id, ``episode_steps`` is its time limit,
+    and a parameterised action space (flat or nested Tuple, OneOf) is presented in the policy's canonical form with
+    parameters in [-1, 1] (:class:`hrlp.envs.actions.NormalisedParameters`).
     The constructor can be pickled (sampler worker processes rebuild it; a Manager's skills are then loaded again
     there, from the same files)."""
     from hrlp.envs import TASKS, make
+    from hrlp.envs.actions import is_parameterised, make_normalised
     from hrlp.envs.check import gym_kwargs, probe_task
 
     name = task.removeprefix("hrlp/").removesuffix("-v0")
     if name not in TASKS and macro is not None:
         raise ValueError(f"{task}: a Manager commands arm skills, so its task must be an hrlp task (see 'hrlp tasks')")
-    probe_task(task, episode_steps, **kwargs)  # validate arguments and spaces now, before any compute
+    _, action_space = probe_task(task, episode_steps, **kwargs)  # validate arguments and spaces now, before any compute
     if name in TASKS:
         kw = dict(kwargs)
         if episode_steps is not None:
@@ -172,6 +186,8 @@ def env_factory(
         if macro is None:
             return functools.partial(make, name, **kw)
         return _MacroFactory(name, kw, macro, gamma, macro.load_skills())
+    if is_parameterised(action_space):  # the policy acts in [-1, 1] per bounded parameter (hrlp.envs.actions)
+        return functools.partial(make_normalised, task, **gym_kwargs(task, episode_steps, kwargs))
     return functools.partial(gym.make, task, **gym_kwargs(task, episode_steps, kwargs))
 
 
@@ -254,6 +270,8 @@ class Trainer:
             self.sampler = Sampler(envs, self.policy, self.normalizer, seed=cfg.seed)
         self.iteration = 0
         self.env_steps = 0
+        self.episodes_done = 0
+        """Training episodes finished so far (those that ended within a batch)."""
         self.pending_value_fit: tuple[torch.Tensor, torch.Tensor] | None = None
         """``(obs [B, D], returns [B])`` of the last batch, which the baseline is fitted on in the next iteration."""
 
@@ -287,7 +305,8 @@ class Trainer:
         with torch.no_grad():
             values = self.value_net(obs).reshape(T, N)
             next_values = self.value_net(batch.next_obs.reshape(T * N, D)).reshape(T, N)
-        adv = gae(batch.rewards, values, next_values, batch.terminated, batch.truncated, cfg.trpo.gamma, cfg.trpo.gae_lambda,
+        rewards = batch.rewards if cfg.reward_scale == 1 else batch.rewards * cfg.reward_scale  # training only
+        adv = gae(rewards, values, next_values, batch.terminated, batch.truncated, cfg.trpo.gamma, cfg.trpo.gae_lambda,
                   discount=batch.discount)  # fmt: skip
         self._check_value_targets(values, next_values, adv.advantages, adv.returns)
         actions = batch.actions.reshape(T * N, *batch.actions.shape[2:])
@@ -305,11 +324,13 @@ class Trainer:
         t2 = time.perf_counter()
         self.iteration += 1
         self.env_steps += batch.env_steps
+        self.episodes_done += len(episodes)
         wall = t2 - t0
         out: dict[str, float] = {
             "iteration": self.iteration,
             "env_steps": self.env_steps,
             "episodes": len(episodes),
+            "episodes_total": self.episodes_done,
             "return_mean": mean_or_nan([e.ret for e in episodes]),
             "episode_length": mean_or_nan([e.length for e in episodes]),
             "success_rate": mean_or_nan([e.success for e in episodes]),
@@ -363,6 +384,7 @@ class Trainer:
             "config": self.cfg.to_json(),
             "iteration": self.iteration,
             "env_steps": self.env_steps,
+            "episodes_done": self.episodes_done,
             "normalizer": self.normalizer.config(),
             "obs_dim": self.obs_dim,
         }
@@ -387,6 +409,7 @@ class Trainer:
         unpack_generators(tensors, meta, {}, trainer._generators())
         trainer.sampler.set_state(meta["sampler"])
         trainer.iteration, trainer.env_steps = int(meta["iteration"]), int(meta["env_steps"])
+        trainer.episodes_done = int(meta.get("episodes_done", 0))  # checkpoints before the episode budget lack it
         if "pending_value_fit.obs" in tensors:
             trainer.pending_value_fit = (tensors["pending_value_fit.obs"], tensors["pending_value_fit.returns"])
         return trainer
@@ -613,6 +636,11 @@ class StepPlan:
                 "--batch-steps rounded up to a multiple of --num-envs")  # fmt: skip
 
 
+def budget_spent(cfg: TrainConfig, env_steps: int, episodes: int) -> bool:
+    """Whether a run of ``cfg`` that has trained ``env_steps`` steps and finished ``episodes`` episodes is done."""
+    return env_steps >= cfg.steps or (cfg.episodes is not None and episodes >= cfg.episodes)
+
+
 def plan_steps(cfg: TrainConfig, done: int = 0) -> StepPlan:
     """The :class:`StepPlan` of ``cfg`` from ``done`` steps already trained."""
     return StepPlan(cfg.steps, done, cfg.steps_per_env * cfg.num_envs, cfg.macro is not None)
@@ -644,10 +672,11 @@ def train(
 ) -> Iterator[dict[str, float]]:
     """Train, yielding each iteration's statistics; writes logs, a checkpoint per iteration, and ``config.json``.
 
-    With ``resume``, continue from ``run_dir/checkpoint`` (its config must equal ``cfg`` except ``steps``, which
-    may grow; a difference raises ValueError naming every differing setting); log rows written after that checkpoint
-    are dropped so the log matches the restored state. Without it, a directory that holds a checkpoint -- or only the
-    ``.old`` copy a kill between a save's renames leaves (:func:`hrlp.checkpoint.checkpoint_exists`) -- is refused.
+    With ``resume``, continue from ``run_dir/checkpoint`` (its config must equal ``cfg`` except the budgets ``steps``
+    and ``episodes``, which may grow; a difference raises ValueError naming every differing setting); log rows written
+    after that checkpoint are dropped so the log matches the restored state. Without it, a directory that holds a
+    checkpoint -- or only the ``.old`` copy a kill between a save's renames leaves
+    (:func:`hrlp.checkpoint.checkpoint_exists`) -- is refused.
 
     The run holds an OS lock on ``run_dir`` (:func:`hrlp.atomic.directory_lock`) from before it reads the checkpoint
     until it ends: a second trainer, or a ``--resume`` beside a running one, fails at once with a one-line error.
@@ -675,10 +704,10 @@ def train(
         logger: RunLogger | None = None
         try:  # from here on, whatever fails, the sampler (and its worker processes) is closed
             if resume:
-                differences = config_differences(trainer.cfg, cfg)
+                differences = config_differences(trainer.cfg, cfg, ignore=("steps", "episodes"))
                 if differences:
-                    raise ValueError(f"{run_dir}: --resume needs the run's own settings (only --steps may change); "
-                                     f"{'; '.join(differences)}")  # fmt: skip
+                    raise ValueError(f"{run_dir}: --resume needs the run's own settings (only --steps and --episodes "
+                                     f"may change); {'; '.join(differences)}")  # fmt: skip
                 trainer.cfg = cfg
             # Rows past the checkpoint (all of them for a run killed before its first one) are written again.
             _truncate_log(run_dir / "progress.csv", trainer.iteration)
@@ -689,7 +718,7 @@ def train(
                 on_start(plan_steps(cfg, trainer.env_steps))
             logger = RunLogger(run_dir)
             streak = 0
-            while trainer.env_steps < cfg.steps:
+            while not budget_spent(cfg, trainer.env_steps, trainer.episodes_done):
                 stats = trainer.iterate()
                 # The log row first, then the checkpoint: a kill between the two leaves a row past the checkpoint,
                 # which a resume drops and writes again; the other order would leave the iteration out of the log.
@@ -720,6 +749,9 @@ class RunSummary:
     """The run's low-level environment steps at the end (a resumed run's earlier ones included)."""
     env_steps_this_session: int = 0
     """Low-level steps trained in this session."""
+    episodes: int | None = None
+    """With an episode budget, the training episodes the run has finished at the end (None: no budget, or no iteration
+    ran in this session)."""
     rejected: int = 0
     """TRPO steps of this session that were rejected (the policy unchanged)."""
     longest_rejected_streak: int = 0
@@ -733,6 +765,8 @@ class RunSummary:
             f"trained {self.iterations} iteration{'s' if self.iterations != 1 else ''}, {self.env_steps_this_session:,} "
             f"environment steps ({self.env_steps:,} in the run)"
         )
+        if self.episodes is not None:
+            out += f", {self.episodes:,} training episodes in the run"
         if self.iterations and self.rejected == self.iterations:
             out += f"; warning: all {self.rejected} TRPO steps were rejected, the policy did not change"
         elif self.rejected:
@@ -740,13 +774,15 @@ class RunSummary:
         return out
 
 
-def progress_line(label: str, stats: dict[str, float], total: int, elapsed_s: float) -> str:
+def progress_line(label: str, stats: dict[str, float], total: int, elapsed_s: float, episodes: int | None = None) -> str:
     """One line for an iteration's statistics: what a log written to a file shows instead of a progress bar, e.g.
     ``train Reacher: iteration 3, 150,000/1,000,000 steps (15%), return -40.2, success 0.12, kl 0.0098, 2714 steps/s,
-    55 s``."""
+    55 s``; with an episode budget ``episodes``, the episodes finished of it after the steps."""
     done = int(stats["env_steps"])
     total = max(total, done, 1)
     out = f"{label}: iteration {int(stats['iteration'])}, {done:,}/{total:,} steps ({done / total:.0%})"
+    if episodes is not None and "episodes_total" in stats:
+        out += f", {int(stats['episodes_total']):,}/{episodes:,} episodes"
     out += f", return {stats['return_mean']:.1f}"
     if not math.isnan(stats["success_rate"]):
         out += f", success {stats['success_rate']:.2f}"
@@ -779,8 +815,14 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
         def started(plan: StepPlan) -> None:  # the bar appears once the run is set up (an error before: one line only)
             nonlocal start, bar_total, bar
             start, bar_total = plan.done, plan.total or max(plan.requested, plan.done)
-            if (note := plan.note()) is not None:
+            if cfg.episodes is None and (note := plan.note()) is not None:
                 progress.console.print(f"[bold]note:[/] {note}", soft_wrap=True)
+            if cfg.episodes is not None:
+                progress.console.print(
+                    f"[bold]note:[/] the run stops after the iteration that reaches {cfg.episodes:,} "
+                    f"training episodes or {cfg.steps:,} steps, whichever comes first",
+                    soft_wrap=True,
+                )
             bar = progress.add_task(label, total=bar_total, completed=plan.done, status="")
 
         def warned(message: str) -> None:
@@ -791,15 +833,20 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
             status = f"return {st['return_mean']:.1f}"
             if not math.isnan(st["success_rate"]):
                 status += f"  success {st['success_rate']:.2f}"
+            if cfg.episodes is not None:
+                status += f"  episodes {int(st['episodes_total']):,}/{cfg.episodes:,}"
             status += f"  kl {st['trpo/kl']:.4f}  {st['time/steps_per_s']:.0f} steps/s"
             done = int(st["env_steps"])
             bar_total = max(bar_total, done)  # a Manager's last iteration passes cfg.steps: the bar says by how much
             assert bar is not None
             progress.update(bar, completed=done, total=bar_total, status=status)
             if lines:
-                console.print(progress_line(label, st, bar_total, time.perf_counter() - t0), soft_wrap=True, highlight=False)
+                line = progress_line(label, st, bar_total, time.perf_counter() - t0, cfg.episodes)
+                console.print(line, soft_wrap=True, highlight=False)
             summary.iterations += 1
             summary.env_steps, summary.env_steps_this_session = done, done - start
+            if cfg.episodes is not None:  # the summary names the episodes when they are a budget
+                summary.episodes = int(st["episodes_total"])
             streak = 0 if st.get("trpo/accepted", 1.0) else streak + 1
             summary.rejected += streak > 0
             summary.longest_rejected_streak = max(summary.longest_rejected_streak, streak)

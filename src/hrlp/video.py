@@ -152,9 +152,10 @@ def rollout_frames(
         from hrlp.train import load_trained
 
         trained = load_trained(Path(source))
-        if trained.config.task.removeprefix("hrlp/").removesuffix("-v0") not in TASKS:
-            raise ValueError(f"{source}: only runs on hrlp tasks render, this one trained {trained.config.task}")
-        env = trained.make_env(render_mode="rgb_array", **render_kwargs)
+        gym_run = trained.config.task.removeprefix("hrlp/").removesuffix("-v0") not in TASKS
+        # A Gymnasium environment draws its own frames (its size and camera are its own: render_kwargs are the arm's).
+        env = trained.make_env(render_mode="rgb_array") if gym_run else trained.make_env(render_mode="rgb_array",
+                                                                                          **render_kwargs)  # fmt: skip
         gen = torch.Generator().manual_seed(seed)
         act = lambda obs: trained.act(env, obs, gen, True)  # noqa: E731
         name = f"{trained.config.task} ({'Manager' if isinstance(env, MacroEnv) else 'flat policy'} of {source})"
@@ -166,9 +167,17 @@ def rollout_frames(
         rng = np.random.default_rng(seed)
         act = lambda obs: rng.uniform(-1.0, 1.0, size=9)  # noqa: E731
         name = f"{task} (random actions)"
-    low: ArmEnv = env.env if isinstance(env, MacroEnv) else env.unwrapped
-    n = steps or low.episode_steps
-    fps = low.metadata["render_fps"]
+    low = env.env if isinstance(env, MacroEnv) else env.unwrapped
+    if isinstance(low, ArmEnv):
+        n, fps = steps or low.episode_steps, int(low.metadata["render_fps"])
+    else:  # a Gymnasium run: its time limit (else 1,000 steps) and its frame rate (else 30)
+        modes = env.metadata.get("render_modes", [])
+        if "rgb_array" not in modes:
+            env.close()
+            raise ValueError(f"{source}: {env.spec.id if env.spec else 'its environment'} does not draw frames "
+                             f"(render modes {modes}; a video needs 'rgb_array')")  # fmt: skip
+        n = steps or (env.spec.max_episode_steps if env.spec and env.spec.max_episode_steps else 1000)
+        fps = int(env.metadata.get("render_fps") or 30)
 
     def frames() -> Iterator[np.ndarray]:
         obs, _ = env.reset(seed=seed)

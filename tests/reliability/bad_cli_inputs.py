@@ -209,9 +209,15 @@ CASES: tuple[BadInput, ...] = (
     _c("dagger-states-zero", "dagger {run} --states 0", r"--states must be a positive integer", "clean"),
     _c("dagger-starts-fraction-beyond-1", "dagger {run} --starts-fraction 2", r"--starts-fraction must be in \(0, 1\]",
        "clean"),
-    # --- skills build (its checks are the runner's) and the command itself ----------------------------------------
+    # --- skills build (its options checked while parsed) and the command itself ----------------------------------------
     _c("skills-build-workers-too-many", "skills build --library {tmp}/lib --out {tmp}/o --only gripper --budget 16 "
-       "--workers {too_many}", r"--workers must be at most", "silent", torch=True),
+       "--workers {too_many}", r"--workers must be at most", "silent"),
+    _c("skills-build-library-a-file", "skills build --library {file} --out {tmp}/o --only gripper --budget 16",
+       r"--library .* is a file, not a skill library", "misleading"),
+    _c("skills-build-out-a-file", "skills build --library {tmp}/lib --out {file} --only gripper --budget 16",
+       r"--out .* is a file, not a directory", "clean"),
+    _c("skills-show-library-a-file", "skills show reacher --library {file}", r"--library .* is a file, not a skill library",
+       "silent"),
     _c("unknown-command", "nosuchcommand", r"No such command 'nosuchcommand'", "multiline"),
     _c("tasks-unknown-option", "tasks --foo", r"tasks: No such option: --foo", "multiline"),
     _c("skills-unknown-subcommand", "skills nosuch", r"skills: No such command 'nosuch'", "multiline"),

@@ -125,3 +125,41 @@ def test_a_dead_ray_address_is_named_within_the_connect_timeout():
     assert problem is not None and f"127.0.0.1:{port}" in problem and time.perf_counter() - start < 3
     assert "HOST:PORT" in ray_address_problem("nowhere")
     assert ray_address_problem("auto") is None
+
+
+def test_a_ray_address_must_answer_as_ray_does_and_quickly():
+    # A server that is not Ray's (an HTTP server, a listener that never answers) used to pass the check, and Ray then
+    # waited ~20 s before its own multi-line error. A gRPC server (what Ray's GCS is) passes.
+    import http.server
+    import socket
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    grpc = pytest.importorskip("grpc")
+    httpd = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen()
+    server = grpc.server(ThreadPoolExecutor(max_workers=1))
+    grpc_port = server.add_insecure_port("127.0.0.1:0")
+    server.start()
+    try:
+        for port, answer in ((httpd.server_port, "it answered b'"), (silent.getsockname()[1], "no answer within")):
+            start = time.perf_counter()
+            problem = ray_address_problem(f"127.0.0.1:{port}")
+            assert problem is not None and "is not a Ray cluster" in problem and answer in problem, problem
+            assert time.perf_counter() - start < 2
+        assert ray_address_problem(f"127.0.0.1:{grpc_port}") is None
+    finally:
+        httpd.shutdown()
+        silent.close()
+        server.stop(None)
+
+
+def test_skills_list_says_when_the_library_is_missing(tmp_path):
+    # It used to list the shipped skills without a word, as if the missing library were empty.
+    r = subprocess.run([sys.executable, "-m", "hrlp", "skills", "list", "--library", str(tmp_path / "nolib")],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert r.returncode == 0 and "reacher" in r.stdout
+    assert f"no library at {tmp_path / 'nolib'} yet" in r.stderr.replace("\n", "")

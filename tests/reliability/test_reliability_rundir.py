@@ -148,8 +148,8 @@ def test_resume_refuses_every_differing_option_by_name_and_keeps_the_runs_own(tm
     lines = [line for line in r.output.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0] == (
         f"error: --resume: {run} was trained with other settings: --max-kl 0.01 (the run: 0.02), --num-envs 8 (the run: "
-        "4), --task-arg c1=-5 (the run: (none)); only --steps may change (leave the other options out to continue "
-        "with the run's own)"
+        "4), --task-arg c1=-5 (the run: (none)); only --steps and --episodes may change (leave the other options out to "
+        "continue with the run's own)"
     )
     r = invoke("train", "Gripper", "--run-dir", str(run), "--resume")
     assert r.exit_code == 2 and "TASK Gripper (the run: Reacher)" in r.output
@@ -162,7 +162,7 @@ def test_resume_refuses_every_differing_option_by_name_and_keeps_the_runs_own(tm
     assert meta["config"]["trpo"]["max_kl"] == 0.02 and meta["config"]["seed"] == 3 and meta["env_steps"] == 48
     # The API says which settings differ too.
     cfg = TrainConfig.from_json(meta["config"])
-    with pytest.raises(ValueError, match=r"only --steps may change\); seed: 3 in the run, 4 given"):
+    with pytest.raises(ValueError, match=r"only --steps and --episodes may change\); seed: 3 in the run, 4 given"):
         list(train(TrainConfig(**{**vars(cfg), "seed": 4}), run, resume=True))
 
 

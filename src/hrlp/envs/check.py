@@ -22,32 +22,30 @@ def default_episode_steps() -> int:
 
 
 def parameterised_dims(space: gym.Space) -> tuple[int, ...]:
-    """The block sizes ``(d_1, ..., d_n)`` of a ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` space; ValueError otherwise."""
-    ok = (
-        isinstance(space, gym.spaces.Tuple)
-        and len(space.spaces) >= 2
-        and isinstance(space.spaces[0], gym.spaces.Discrete)
-        and int(space.spaces[0].start) == 0
-        and int(space.spaces[0].n) == len(space.spaces) - 1
-        and all(isinstance(b, gym.spaces.Box) and len(b.shape) == 1 for b in space.spaces[1:])
-    )
-    if not ok:
-        raise ValueError(
-            f"unsupported action space {space}: use Box, Discrete, or Tuple(Discrete(n), Box(d_1), ..., Box(d_n))"
-        )
-    return tuple(int(b.shape[0]) for b in space.spaces[1:])
+    """The block sizes ``(d_1, ..., d_n)`` of a ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` space, the form hrlp's
+    hierarchical policy acts in (the nested Tuple and OneOf forms reach it through
+    :class:`~hrlp.envs.actions.NormalisedParameters`); ValueError otherwise (:func:`~hrlp.envs.actions.parameter_blocks`)."""
+    from hrlp.envs.actions import parameter_blocks
+
+    kind, blocks = parameter_blocks(space)
+    if kind != "flat":
+        raise ValueError(f"action space {space}: hrlp's policy acts in Tuple(Discrete(n), Box(d_1), ..., Box(d_n)); "
+                         "wrap the environment in hrlp.envs.actions.NormalisedParameters")  # fmt: skip
+    return tuple(int(b.shape[0]) for b in blocks)
 
 
 def check_spaces(task: str, observation_space: gym.Space, action_space: gym.Space) -> None:
     """Raise ValueError naming ``task`` unless hrlp's policies can read its observations (a Box) and produce its actions
-    (Box, Discrete or a parameterised Tuple)."""
+    (Box, Discrete or a parameterised space: flat or nested Tuple, or OneOf, see :mod:`hrlp.envs.actions`)."""
     if not isinstance(observation_space, gym.spaces.Box) or observation_space.shape is None:
         raise ValueError(f"{task}: unsupported observation space {observation_space}: hrlp's policies read a Box of "
                          "numbers (wrap the environment so that it observes one, e.g. a one-hot Box for a Discrete "
                          "state)")  # fmt: skip
     if not isinstance(action_space, gym.spaces.Box | gym.spaces.Discrete):
+        from hrlp.envs.actions import parameter_blocks
+
         try:
-            parameterised_dims(action_space)
+            parameter_blocks(action_space)
         except ValueError as e:
             raise ValueError(f"{task}: {e}") from None
 
@@ -70,6 +68,53 @@ def gym_arguments(env_id: str) -> tuple[str, ...]:
     except Exception:  # a creator that cannot be inspected: name gymnasium.make's arguments only
         pass
     return tuple(dict.fromkeys([*names, *_GYM_MAKE_ARGUMENTS]))
+
+
+def registered_gym_id(task: str) -> str:
+    """The Gymnasium id that ``task`` names: a registered id (``Pendulum-v1``), or ``module:id`` (``my_pkg.envs:MyEnv-v0``:
+    the module is imported first, so that its ``gymnasium.register`` calls run, as ``gymnasium.make`` does). Raises
+    ValueError, one line, for a module that cannot be imported or an id that nothing registered."""
+    module, sep, env_id = task.rpartition(":")
+    if sep:
+        if not module or not env_id:
+            raise ValueError(f"task {task!r}: write a module's environment as MODULE:ID, e.g. my_pkg.envs:MyEnv-v0")
+        import importlib
+
+        try:
+            importlib.import_module(module)
+        except Exception as e:  # ImportError, or the module's own code failing: either way, one line naming it
+            raise ValueError(f"task {task!r}: cannot import module {module!r} ({type(e).__name__}: "
+                             f"{' '.join(str(e).split())}); is it installed or on PYTHONPATH?") from None  # fmt: skip
+        if env_id not in gym.registry:
+            near = sorted(k for k in gym.registry if k.split("-v")[0].lower() == env_id.split("-v")[0].lower())
+            also = f" (registered: {', '.join(near)})" if near else ""
+            raise ValueError(f"task {task!r}: module {module!r} registers no Gymnasium id {env_id!r}{also}")
+        return env_id
+    if task not in gym.registry:
+        hint = " (Atari ids need pip install 'gymnasium[atari]')" if task.startswith("ALE/") else ""
+        raise ValueError(f"unknown task {task!r}: not an hrlp task (see 'hrlp tasks'), a registered Gymnasium id, nor "
+                         f"MODULE:ID of a module that registers one{hint}")  # fmt: skip
+    return task
+
+
+SHORT_EPISODE_STEPS = 50
+"""Episodes declared to last at most this many decisions are short: for a Gymnasium id registered with such a
+``max_episode_steps``, ``hrlp train`` uses :data:`SHORT_EPISODE_SETTINGS` unless the options they set are given."""
+SHORT_EPISODE_SETTINGS: dict[str, Any] = {"batch_steps": 500, "max_kl": 0.05}
+"""``hrlp train``'s settings for short episodes (measured on the tasks of :mod:`hrlp.envs.param_tasks` by
+``benchmarks/short_episodes.py``: docs/benchmarks.md); the defaults otherwise are 50,000 decisions and 0.01."""
+
+
+def declared_episode_steps(task: str, episode_steps: int | None = None) -> int | None:
+    """The most decisions an episode of ``task`` may last, as declared: ``episode_steps`` if given, else a Gymnasium
+    id's registered time limit (``max_episode_steps``), else the hrlp tasks' default; None when nothing declares one."""
+    from hrlp.envs import TASKS
+
+    if episode_steps is not None:
+        return episode_steps
+    if task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
+        return default_episode_steps()
+    return gym.spec(registered_gym_id(task)).max_episode_steps
 
 
 def _dependency_line(env_id: str, error: Exception) -> str:
@@ -115,9 +160,7 @@ def probe_task(task: str, episode_steps: int | None = None, /, **kwargs: Any) ->
         spaces = env.observation_space, env.action_space
         env.close()
         return spaces
-    if task not in gym.registry:
-        hint = " (Atari ids need pip install 'gymnasium[atari]')" if task.startswith("ALE/") else ""
-        raise ValueError(f"unknown task {task!r}: not an hrlp task (see 'hrlp tasks') nor a registered Gymnasium id{hint}")
+    env_id = registered_gym_id(task)
     kwargs = gym_kwargs(task, episode_steps, kwargs)
     try:
         env = gym.make(task, **kwargs)
@@ -126,7 +169,7 @@ def probe_task(task: str, episode_steps: int | None = None, /, **kwargs: Any) ->
     except ImportError as e:
         raise ValueError(f"{task} needs the Python package {e.name or e}, which is not installed") from None
     except TypeError as e:
-        valid = gym_arguments(task)
+        valid = gym_arguments(env_id)
         if unknown := [k for k in kwargs if k not in valid]:
             raise ValueError(invalid_arguments_line(task, unknown, valid)) from None
         raise ValueError(f"{task}: invalid task arguments {kwargs}: {' '.join(str(e).split())}") from None

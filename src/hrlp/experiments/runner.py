@@ -96,9 +96,20 @@ def find_same_run(job: Job) -> Path | None:
             found = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError):
             continue
-        if found.get("config") == want and found.get("env_steps", 0) >= job.config.steps:
+        if _same_config(found.get("config"), want) and found.get("env_steps", 0) >= job.config.steps:
             return path.parent
     return None
+
+
+def _same_config(found: Any, want: dict[str, Any]) -> bool:
+    """Whether a result's config is ``want``, read as :class:`TrainConfig` reads it: a field added to the config after
+    the run was made takes its default (which the run trained with)."""
+    if not isinstance(found, dict):
+        return False
+    try:
+        return json.loads(json.dumps(TrainConfig.from_json(found).to_json())) == want
+    except (TypeError, ValueError, KeyError, AttributeError):
+        return False
 
 
 def copy_run(job: Job, source: Path) -> dict[str, Any]:
@@ -142,7 +153,7 @@ def _run_job_locked(job: Job, reuse: bool) -> dict[str, Any]:
     """:func:`run_job` under the run directory's lock (another process may have finished the job meanwhile)."""
     import torch
 
-    from hrlp.evaluate import evaluate_run
+    from hrlp.evaluate import ProgressLines, evaluate_run
     from hrlp.plots import read_progress
     from hrlp.train import progress_line, train
 
@@ -157,7 +168,9 @@ def _run_job_locked(job: Job, reuse: bool) -> dict[str, Any]:
     for st in train(job.config, job.run_dir, resume=resume):  # a line per iteration: jobs run in parallel, bars would mix
         print(progress_line(label, st, job.config.steps, time.perf_counter() - started), file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    ev = evaluate_run(job.run_dir, episodes=job.eval_episodes)
+    # The evaluation's progress: a line when 30 s pass without one, and one at the end (these jobs run in parallel).
+    lines = ProgressLines(f"eval {label}", lambda line: print(line, file=sys.stderr, flush=True), every=0, interval_s=30.0)
+    ev = evaluate_run(job.run_dir, episodes=job.eval_episodes, on_progress=lines)
     progress = read_progress(job.run_dir)
     result = {
         "preset": job.preset,

@@ -1,8 +1,8 @@
 """``hrlp tables``: the paper's tables and learning curves, rebuilt from run directories alone.
 
 For each preset with finished runs under ``ROOT/PRESET/RUN/sSEED/result.json``: a markdown table
-(per run: seeds, our mean with a 95% bootstrap interval across seeds, the paper's number, steps
-and wall time), a PNG of the learning curves (mean over seeds with a min-max band), for a
+(per run: seeds, our mean with a 95% bootstrap interval across seeds, the interquartile mean with
+its own, the paper's number, steps and wall time), a PNG of the learning curves (mean over seeds with a min-max band), for a
 hyperparameter sweep a scatter of one dot per run against the swept value (the paper's Figures 4,
 8 and 10), and for success presets a sample-efficiency table: the environment steps until the
 smoothed training success rate first reaches given thresholds, with right-censored seeds.
@@ -50,6 +50,42 @@ def bootstrap_interval(values: list[float], confidence: float = 0.95, seed: int 
     res = bootstrap((a,), np.mean, confidence_level=confidence, n_resamples=10_000, method="percentile",
                     random_state=np.random.default_rng(seed))  # fmt: skip
     return m, float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def iqm_interval(values: Sequence[float], confidence: float = 0.95, seed: int = 0) -> tuple[float, float, float]:
+    """Interquartile mean (IQM) across seeds and a percentile-bootstrap interval of it, as rliable reports them.
+
+    The IQM is ``scipy.stats.trim_mean(values, 0.25)``: the mean after cutting ``int(0.25 * n)`` values from each end
+    of the sorted values (the middle half for n divisible by 4; for fewer than 4 seeds nothing is cut, so it is the
+    mean). The interval resamples the seeds with replacement (10,000 resamples, generator seeded with ``seed``, so
+    the same values always give the same interval): rliable's stratified bootstrap for a single task, here one run.
+
+    Returns ``(iqm, low, high)``: NaNs for no values; a zero-width interval ``(v, v, v)`` for a single seed or for
+    values that are all equal.
+    """
+    a = np.asarray(values, dtype=float)
+    if a.size == 0:
+        return math.nan, math.nan, math.nan
+    from scipy.stats import bootstrap, trim_mean
+
+    m = float(trim_mean(a, 0.25))
+    if a.size < 2 or np.all(a == a[0]):
+        return m, m, m
+
+    def iqm(x: np.ndarray, axis: int = -1) -> np.ndarray:
+        return trim_mean(x, 0.25, axis=axis)
+
+    res = bootstrap((a,), iqm, confidence_level=confidence, n_resamples=10_000, method="percentile",
+                    random_state=np.random.default_rng(seed))  # fmt: skip
+    return m, float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def iqm_cell(values: Sequence[float]) -> str:
+    """The table cell of :func:`iqm_interval`: ``IQM [low, high]``, the IQM alone for one seed, '-' for none."""
+    m, lo, hi = iqm_interval(values)
+    if math.isnan(m):
+        return "-"
+    return _g(m) if len(values) == 1 else f"{_g(m)} [{_g(lo)}, {_g(hi)}]"
 
 
 def metric_value(result: dict[str, Any], metric: str) -> float | None:
@@ -415,7 +451,8 @@ def build_tables(
     ValueError names the files, before anything is written. Each file written is recorded in that manifest.
 
     Each run's cell is the mean over seeds with a 95% percentile-bootstrap interval across seeds; a run with a
-    single seed shows that run's own interval over its evaluation episodes (Wilson for success). Presets whose
+    single seed shows that run's own interval over its evaluation episodes (Wilson for success). Beside it, the
+    interquartile mean over seeds with its own bootstrap interval (:func:`iqm_interval`). Presets whose
     metric is success also get a sample-efficiency table (:func:`sample_efficiency_lines`) at ``thresholds`` of the
     training success rate, smoothed over ``window`` iterations (None: each preset's own :attr:`Preset.thresholds`,
     else :data:`DEFAULT_THRESHOLDS`).
@@ -460,7 +497,9 @@ def build_tables(
             f"# {preset_name}" + (f": {preset.description} ({preset.source})" if preset else ""),
             "",
             f"Metric: {metric.replace('_', ' ')} (mean over seeds, 95% bootstrap interval across seeds; for a single "
-            "seed, that run's own 95% interval over its evaluation episodes). "
+            "seed, that run's own 95% interval over its evaluation episodes). IQM: the interquartile mean over seeds "
+            "(`scipy.stats.trim_mean(x, 0.25)`, the mean for fewer than 4 seeds) with a 95% percentile-bootstrap "
+            "interval over seeds. "
             f"Rebuild: `hrlp tables --root {root} --out {out}`.",
             "",
             f"Figures: `{preset_name}.png` (learning curves)"
@@ -478,10 +517,10 @@ def build_tables(
             ]
         moving = metric == "target_dist_sum"
         lines += [
-            "| run | seeds | ours | paper | env steps per run | wall time (h, all seeds) |"
+            "| run | seeds | ours | IQM | paper | env steps per run | wall time (h, all seeds) |"
             + (" success / lifted / min d(C, T) / TargetDistSum minus untouched |" if moving else "")
             + (" decisions per skill (mean over seeds) |" if managers else ""),
-            "|---|---:|---|---:|---:|---:|" + ("---|" if moving else "") + ("---|" if managers else ""),
+            "|---|---:|---|---|---:|---:|---:|" + ("---|" if moving else "") + ("---|" if managers else ""),
         ]
         grid: dict[str, tuple[str, float | None]] = {}
         for name in order:
@@ -497,7 +536,7 @@ def build_tables(
             steps_cell = ", ".join(f"{s:,}" for s in steps)
             ours = f"{_g(m)} [{_g(lo)}, {_g(hi)}]"
             star = "*" if any(r.get("copied_from") for r in results) else ""
-            row = f"| {name}{star} | {len(results)} | {ours} | {paper_cell} | {steps_cell} | {wall:.2f} |"
+            row = f"| {name}{star} | {len(results)} | {ours} | {iqm_cell(values)} | {paper_cell} | {steps_cell} | {wall:.2f} |"
             lines.append(
                 row + (f" {move_cell(results)} |" if moving else "") + (f" {usage_cell(results)} |" if managers else "")
             )

@@ -33,7 +33,7 @@ import torch
 
 from hrlp.atomic import atomic_path
 from hrlp.envs.tasks import HANDOVER_BANK
-from hrlp.skills.library import SkillLibrary, default_library_root, load_skill
+from hrlp.skills.library import SkillLibrary, default_library_root, locate_skill, search_roots
 from hrlp.skills.starts import write_start_bank
 
 #: The tasks whose skills can be retrained from hand-over states (their task reads a start bank).
@@ -148,9 +148,9 @@ def run_round(cfg: DaggerConfig, out_dir: Path, console: Any = None) -> dict[str
     manager_cfg = read_run_checkpoint(manager_run / "checkpoint")[2]
     if manager_cfg.macro is None or cfg.skill not in manager_cfg.macro.skills:
         raise ValueError(f"{manager_run}: not a Manager over skill {cfg.skill!r}")
-    parent = load_skill(cfg.skill, manager_cfg.macro.library)
-    parent_dir = _skill_dir(cfg.skill, manager_cfg.macro.library)
-    parent_manifest = SkillLibrary(parent_dir.parent).manifest(parent_dir.name)
+    parent_library = locate_skill(cfg.skill, search_roots(manager_cfg.macro.library))
+    parent, parent_manifest = parent_library.load(cfg.skill), parent_library.manifest(cfg.skill)
+    parent_dir = parent_library.root / cfg.skill
     if cfg.name in library.names() and library.manifest(cfg.name).get("lineage", {}).get("round_dir") != str(out_dir):
         raise ValueError(f"skill {cfg.name!r} already exists in {library.root}; choose another --name")
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -225,17 +225,6 @@ def run_round(cfg: DaggerConfig, out_dir: Path, console: Any = None) -> dict[str
     with atomic_path(out_dir / "round.json") as tmp:
         tmp.write_text(json.dumps(result, indent=2))
     return result
-
-
-def _skill_dir(name: str, library: str | None) -> Path:
-    """The directory of the skill ``name`` as :func:`load_skill` finds it."""
-    from hrlp.skills.library import shipped_library_root
-
-    roots = ([Path(library)] if library else []) + [default_library_root(), shipped_library_root()]
-    for root in roots:
-        if name in SkillLibrary(root).names():
-            return root / name
-    raise ValueError(f"no skill {name!r} in {', '.join(map(str, roots))}")
 
 
 def _finished(run_dir: Path, steps: int) -> bool:
