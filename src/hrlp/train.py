@@ -249,6 +249,7 @@ class Trainer:
         probe = factory()
         obs_dim = int(np.prod(probe.observation_space.shape))
         self.skill_hashes = {s.name: s.content_hash for s in probe.skills} if isinstance(probe, MacroEnv) else {}
+        self.action_units = action_units(probe)
         self.policy = policy_for_space(obs_dim, probe.action_space, cfg.hidden, cfg.init_log_std)
         self.obs_dim = obs_dim
         probe.close()
@@ -381,6 +382,7 @@ class Trainer:
             "sampler": self.sampler.get_state(),
             "kind": "flat" if self.cfg.macro is None else "manager",
             "skills": self.skill_hashes,
+            "action_units": self.action_units,
             "config": self.cfg.to_json(),
             "iteration": self.iteration,
             "env_steps": self.env_steps,
@@ -402,6 +404,7 @@ class Trainer:
         tensors, meta, cfg = read_run_checkpoint(directory, {"sampler": dict})
         trainer = cls(cfg)
         check_skill_hashes(meta.get("skills", {}), trainer.skill_hashes, directory)
+        check_action_units(meta, trainer.action_units, directory)
         load_module("policy", trainer.policy, tensors)
         load_module("value", trainer.value_net, tensors)
         trainer.normalizer.load_state_dict({k.removeprefix("normalizer."): v for k, v in tensors.items()
@@ -452,6 +455,24 @@ def read_run_checkpoint(
     except (TypeError, ValueError, AttributeError) as e:
         raise CheckpointError(f"{where}: its 'config' is malformed ({' '.join(str(e).split())})") from None
     return tensors, meta, cfg
+
+
+def action_units(env: gym.Env) -> str:
+    """``"normalised"`` for an environment whose parameterised actions the policy takes in [-1, 1]
+    (:class:`hrlp.envs.actions.NormalisedParameters`), else ``"native"``: recorded in a run's checkpoint."""
+    from hrlp.envs.actions import NormalisedParameters
+
+    return "normalised" if isinstance(env, NormalisedParameters) else "native"
+
+
+def check_action_units(meta: dict[str, Any], units: str, where: Path) -> None:
+    """Raise :class:`CheckpointError` if a checkpoint's policy acts in other units than its environment now takes: a
+    parameterised-action run saved before parameters were normalised (no ``action_units``) acted in native units."""
+    saved = meta.get("action_units", "native")
+    if saved != units:
+        raise CheckpointError(f"{where}: its policy acts in {saved} units, and {meta['config']['task']}'s parameterised "
+                              f"actions are now taken in {units} ones (a run saved before hrlp took parameters in [-1, 1] "
+                              "acted in the environment's own units); train the run again")  # fmt: skip
 
 
 def check_skill_hashes(saved: dict[str, str], loaded: dict[str, str], where: Path) -> None:
@@ -510,6 +531,7 @@ def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, A
     obs_dim = int(np.prod(env.observation_space.shape))
     if isinstance(env, MacroEnv):
         check_skill_hashes(meta.get("skills", {}), {s.name: s.content_hash for s in env.skills}, directory)
+    check_action_units(meta, action_units(env), directory)
     policy = policy_for_space(obs_dim, env.action_space, cfg.hidden)
     env.close()
     load_module("policy", policy, tensors)

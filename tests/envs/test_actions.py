@@ -241,3 +241,27 @@ def test_a_registered_environment_with_a_bad_space_fails_before_any_compute():
     with pytest.raises(ValueError, match=r"^hrlp_test/ParamStart1-v0: action space .* must start at 0, not 1$"):
         env_factory("hrlp_test/ParamStart1-v0")
     assert parameter_blocks(SPACES["nested"])[0] == "nested"
+
+
+def test_a_checkpoint_records_its_action_units_and_a_native_units_one_is_refused(tmp_path):
+    # A parameterised run saved before parameters were normalised acted in native units: loading it now would read its
+    # actions as [-1, 1] ones without a word. Its checkpoint lacks 'action_units', and every reader refuses it.
+    import json
+
+    from hrlp.checkpoint import CheckpointError
+
+    run = tmp_path / "r"
+    list(train(TrainConfig(task="hrlp_test/PickAndPoint-v0", steps=64, batch_steps=32, num_envs=4), run))
+    meta_path = run / "checkpoint" / "meta.json"
+    saved = json.loads(meta_path.read_text())  # the checkpoint's meta is not covered by the content hash
+    assert saved["meta"]["action_units"] == "normalised"
+    evaluate_run(run, episodes=2)  # loads
+    del saved["meta"]["action_units"]
+    meta_path.write_text(json.dumps(saved))
+    cfg = TrainConfig.from_json(saved["meta"]["config"])
+    for read in (lambda: load_trained(run), lambda: list(train(cfg, run, resume=True))):
+        with pytest.raises(CheckpointError, match=r"acts in native units.*taken in normalised ones.*train the run again"):
+            read()
+    flat = tmp_path / "flat"  # a Box run: native units, before and now
+    list(train(TrainConfig(task="Pendulum-v1", steps=64, batch_steps=32, num_envs=4), flat))
+    assert json.loads((flat / "checkpoint" / "meta.json").read_text())["meta"]["action_units"] == "native"
