@@ -2,18 +2,16 @@
 
 Trains each task of :mod:`hrlp.envs.param_tasks` (a contextual bandit, a parameter-matching task, a sparse-reward
 reaching task) with :data:`~hrlp.envs.param_tasks.SHORT_EPISODE_SETTINGS` for ``--episodes`` training episodes
-per seed (counted from the finished episodes of each iteration; the run stops after the iteration that reaches the
-budget), evaluates the greedy policy over ``--eval-episodes`` episodes (environment seeds 10,000 + index,
-:func:`hrlp.evaluate.evaluate_run`) and prints per task: the optimal return, a uniformly random policy's, the
+per seed (``TrainConfig.episodes``: the run stops after the iteration that reaches the budget), evaluates the
+greedy policy over ``--eval-episodes`` episodes (environment seeds 10,000 + index, :func:`hrlp.evaluate.evaluate_run`)
+and prints per task: the optimal return, a uniformly random policy's, the
 hand-written heuristic's (both over the same evaluation episodes), hrlp's mean and min over seeds, the mean as a
 share of the optimum, the training episodes used and the wall time. One torch thread.
 
     python benchmarks/short_episodes.py [--seeds 3] [--episodes 20000] [--eval-episodes 1000]
                                         [--tasks ParamBandit,ParamMatch,ParamReach] [--out FILE.json [--overwrite]]
 
-Parameters are acted in [-1, 1] and mapped onto each Box's bounds: by hrlp's own action wrapper when it is in
-place (``hrlp.envs.actions``), otherwise by this script's stand-in (:class:`UnitParams`, the same affine map), which
-the output says.
+Parameters are acted in [-1, 1] and mapped onto each Box's bounds by hrlp's action wrapper (``hrlp.envs.actions``).
 """
 
 from __future__ import annotations
@@ -33,40 +31,6 @@ import torch
 from hrlp.envs.param_tasks import PARAM_TASKS, SHORT_EPISODE_SETTINGS, heuristic_action, random_action, short_episode_config
 
 
-class UnitParams(gym.ActionWrapper):
-    """Stand-in for hrlp's parameter-action wrapper: the policy acts each Box in [-1, 1], mapped onto [low, high]."""
-
-    def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
-        space = env.action_space
-        self._blocks = [(b.low.astype(np.float64), b.high.astype(np.float64)) for b in space.spaces[1:]]
-        boxes = [gym.spaces.Box(-1.0, 1.0, shape=b.shape, dtype=np.float32) for b in space.spaces[1:]]
-        self.action_space = gym.spaces.Tuple((space.spaces[0], *boxes))
-
-    def action(self, action: Any) -> tuple:
-        k, *us = action
-        return (k, *(lo + (np.clip(np.asarray(u, np.float64), -1, 1) + 1) / 2 * (hi - lo)
-                     for u, (lo, hi) in zip(us, self._blocks, strict=True)))  # fmt: skip
-
-
-def hrlp_wrapper_in_place() -> bool:
-    """Whether hrlp itself maps parameter actions onto the bounds (its ``hrlp.envs.actions`` module exists)."""
-    import importlib.util
-
-    return importlib.util.find_spec("hrlp.envs.actions") is not None
-
-
-def task_id(name: str, stand_in: bool) -> str:
-    """The Gymnasium id trained: ``hrlp/<name>-v0``, or with the stand-in wrapper ``hrlp_bench/<name>Unit-v0``."""
-    if not stand_in:
-        return f"hrlp/{name}-v0"
-    env_id = f"hrlp_bench/{name}Unit-v0"
-    if env_id not in gym.registry:
-        cls = PARAM_TASKS[name]
-        gym.register(id=env_id, entry_point=lambda **kw: UnitParams(cls(**kw)))
-    return env_id
-
-
 def baseline_return(name: str, policy: str, episodes: int, seed: int = 10_000) -> float:
     """Mean return of the ``random`` or ``heuristic`` policy over the evaluation episodes (seeds ``seed + i``)."""
     env = gym.make(f"hrlp/{name}-v0")
@@ -84,22 +48,20 @@ def baseline_return(name: str, policy: str, episodes: int, seed: int = 10_000) -
     return total / episodes
 
 
-def train_and_evaluate(name: str, seed: int, episodes: int, eval_episodes: int, stand_in: bool, workdir: Path,
+def train_and_evaluate(name: str, seed: int, episodes: int, eval_episodes: int, workdir: Path,
                        settings: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
     """Train ``name`` with the short-episode settings (or ``settings``) for ``episodes`` episodes, greedy-evaluate it."""
     from hrlp.evaluate import evaluate_run
     from hrlp.train import train
 
     horizon = PARAM_TASKS[name]().horizon
-    cfg = short_episode_config(task_id(name, stand_in), steps=episodes * horizon + 10**6, seed=seed, **(settings or {}))
+    cfg = short_episode_config(f"hrlp/{name}-v0", steps=episodes * horizon + 10**6, seed=seed, episodes=episodes,
+                               **(settings or {}))  # fmt: skip
     run_dir = workdir / f"{name}-seed{seed}"
     t0 = time.perf_counter()
     done, iterations, decisions = 0, 0, 0
     for stats in train(cfg, run_dir, on_warning=lambda message: None):
-        done += int(stats["episodes"])
-        iterations, decisions = int(stats["iteration"]), int(stats["env_steps"])
-        if done >= episodes:
-            break
+        done, iterations, decisions = int(stats["episodes_total"]), int(stats["iteration"]), int(stats["env_steps"])
     train_s = time.perf_counter() - t0
     ev = evaluate_run(run_dir, episodes=eval_episodes, deterministic=True)
     return {"seed": seed, "return": ev.ret.mean, "episodes": done, "iterations": iterations, "decisions": decisions,
@@ -125,12 +87,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"{args.out} exists; pass --overwrite to replace it")
     overrides = json.loads(args.settings) if args.settings else {}
     torch.set_num_threads(1)
-    stand_in = not hrlp_wrapper_in_place()
     settings = {**SHORT_EPISODE_SETTINGS, **overrides}
     print(f"settings: {json.dumps(settings)}", flush=True)
-    how = "this script's stand-in wrapper (hrlp.envs.actions is not in place)" if stand_in else "hrlp.envs.actions"
-    print(f"parameter actions: mapped onto the bounds by {how}", flush=True)
-    results: dict[str, Any] = {"settings": settings, "stand_in_wrapper": stand_in, "episodes": args.episodes,
+    results: dict[str, Any] = {"settings": settings, "episodes": args.episodes,
                                "eval_episodes": args.eval_episodes, "command": " ".join(sys.argv), "tasks": {}}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="short_episodes_") as tmp:
         for name in tasks:
@@ -140,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name}: optimal {optimal:.4g}, random {rand:.4g}, heuristic {heur:.4g}", flush=True)
             runs = []
             for seed in range(args.seeds):
-                run = train_and_evaluate(name, seed, args.episodes, args.eval_episodes, stand_in, Path(tmp), overrides)
+                run = train_and_evaluate(name, seed, args.episodes, args.eval_episodes, Path(tmp), overrides)
                 runs.append(run)
                 print(f"  {name} seed {seed}: greedy return {run['return']:.4g} ({run['return'] / optimal:.1%} of optimal), "
                       f"{run['episodes']:,} episodes, {run['iterations']} iterations, {run['decisions']:,} decisions, "

@@ -465,12 +465,12 @@ def train(
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
     if not resume:  # before torch is imported: the task, its arguments and spaces (a resume uses the run's own)
-        batch_steps, max_kl, note = _episode_length_defaults(ctx, task, batch_steps, max_kl)
+        note = _episode_length_defaults(ctx, task)
         _check_numbers(ctx)
         _check_task(task, episode_steps, task_arg, ctx)
         if note:  # after the checks: an error stays the one line
             err_console.print(note, soft_wrap=True, highlight=False)
-    settings, trpo = _run_settings({**ctx.params, "batch_steps": batch_steps, "max_kl": max_kl})
+    settings, trpo = _run_settings(ctx.params)  # short-episode settings, where chosen, are in ctx.params
     _train(settings, task_arg, trpo, run_dir, resume, steps, ctx)
 
 
@@ -664,33 +664,29 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
     return out
 
 
-def _episode_length_defaults(ctx: typer.Context, task: str, batch_steps: int, max_kl: float) -> tuple[int, float, str]:
-    """``(batch_steps, max_kl, note)``: as given, or for a Gymnasium environment whose registration declares episodes of
-    at most :data:`~hrlp.envs.check.SHORT_EPISODE_STEPS` decisions (``max_episode_steps``), the short-episode settings
-    for the options left out, with the note that says so ("" when none). The defaults suit 300-step episodes: on
-    1-10-decision episodes a 50,000-decision batch is a whole 20,000-episode budget. hrlp's own arm tasks keep the
-    paper's settings whatever ``--episode-steps``."""
+def _episode_length_defaults(ctx: typer.Context, task: str) -> str:
+    """For a Gymnasium environment whose registration declares episodes of at most
+    :data:`~hrlp.envs.check.SHORT_EPISODE_STEPS` decisions (``max_episode_steps``), put the short-episode settings into
+    ``ctx.params`` for the options left out and return the note that says so ("" when nothing changes). The defaults
+    suit 300-step episodes: on 1-10-decision episodes a 50,000-decision batch is a whole 20,000-episode budget. hrlp's
+    own arm tasks keep the paper's settings whatever ``--episode-steps``."""
     from hrlp.envs import TASKS
     from hrlp.envs.check import SHORT_EPISODE_SETTINGS, SHORT_EPISODE_STEPS, declared_episode_steps
 
-    given = {name: _given(ctx, name) for name in SHORT_EPISODE_SETTINGS}
-    if all(given.values()) or task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
-        return batch_steps, max_kl, ""
+    left_out = [name for name in SHORT_EPISODE_SETTINGS if not _given(ctx, name)]
+    if not left_out or task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
+        return ""
     try:
         length = declared_episode_steps(task)
     except ValueError:
-        return batch_steps, max_kl, ""  # an unknown task: _check_task says so
+        return ""  # an unknown task: _check_task says so
     if length is None or length > SHORT_EPISODE_STEPS:
-        return batch_steps, max_kl, ""
-    short = SHORT_EPISODE_SETTINGS
-    chosen = {"batch_steps": batch_steps if given["batch_steps"] else short["batch_steps"],
-              "max_kl": max_kl if given["max_kl"] else short["max_kl"]}  # fmt: skip
-    ctx.params.update(chosen)
-    shown = " ".join(f"--{n.replace('_', '-')} {chosen[n]:g}" for n in short if not given[n])
+        return ""
+    ctx.params.update({name: SHORT_EPISODE_SETTINGS[name] for name in left_out})
+    shown = " ".join(f"--{name.replace('_', '-')} {SHORT_EPISODE_SETTINGS[name]:g}" for name in left_out)
     plural = "s" if length != 1 else ""
-    note = (f"note: {task}'s episodes last at most {length:,} decision{plural}: short-episode settings {shown} (give the "
+    return (f"note: {task}'s episodes last at most {length:,} decision{plural}: short-episode settings {shown} (give the "
             "options to choose others; docs/training.md)")  # fmt: skip
-    return int(chosen["batch_steps"]), float(chosen["max_kl"]), note
 
 
 def _check_numbers(ctx: typer.Context) -> None:
