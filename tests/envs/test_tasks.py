@@ -11,7 +11,7 @@ from gymnasium.utils.env_checker import check_env
 
 import hrlp.envs  # noqa: F401  (registers the ids)
 from hrlp.envs import TASKS, make
-from hrlp.envs.tasks import GripReward, ReachAndGripTask, SparseSuccess
+from hrlp.envs.tasks import GripperTask, GripReward, ReachAndGripTask, SparseSuccess
 
 NAMES = list(TASKS)
 
@@ -229,6 +229,33 @@ def test_gripper_close_starts_open_the_fingers_around_the_capsule():
     default = make("Gripper")
     default.reset(seed=0)
     assert 0.05 - 0.01 <= default.physics.hand_to_capsule() <= 0.09 + 0.01 and default.physics.data.qpos[7] == 0
+
+
+def test_gripper_distance_curriculum_starts_close_and_widens_to_the_start_set():
+    task = GripperTask(start_distance=(0.0, 0.09), distance_curriculum=100, curriculum_from=0.03)
+    assert [task.start_distance_high(e) for e in (0, 50, 100, 10_000)] == pytest.approx([0.03, 0.06, 0.09, 0.09])
+    assert GripperTask(start_distance=(0.05, 0.09), distance_curriculum=10).start_distance_high(0) == 0.05  # clipped
+    assert GripperTask(start_distance=(0.0, 0.09)).start_distance_high(0) == 0.09  # no curriculum: the paper's set
+    env = make("Gripper", start_distance=[0.0, 0.09], distance_curriculum=1000, finger_opening=[0.8, 1.0])
+    first = []
+    for seed in range(8):  # the first episodes of fresh environments start within the curriculum's 3 cm
+        env.reset(seed=seed)
+        first.append(env.physics.hand_to_capsule())
+        env = make("Gripper", start_distance=[0.0, 0.09], distance_curriculum=1000, finger_opening=[0.8, 1.0])
+    assert max(first) <= 0.03 + 0.01  # IK tolerance
+    resumed = make("Gripper", start_distance=[0.0, 0.09], distance_curriculum=1000)
+    state = resumed.get_state()
+    state["episodes"] = 1000  # a restored environment is past the curriculum: starts from the whole set again
+    resumed.set_state(state)
+    far = []
+    for seed in range(20):
+        resumed.reset(seed=seed)
+        far.append(resumed.physics.hand_to_capsule())
+    assert max(far) > 0.05
+    with pytest.raises(ValueError, match="distance_curriculum"):
+        make("Gripper", distance_curriculum=-1)
+    with pytest.raises(ValueError, match="curriculum_from"):
+        make("Gripper", curriculum_from=0.0)
 
 
 @pytest.mark.parametrize(

@@ -446,6 +446,12 @@ class GripperTask(Task):
     """Weight of a fourth reward term, -push_coeff * the capsule's horizontal displacement from where it lay at the
     episode's start, paid while Definition 1 does not hold: knocking the capsule away costs, lifting it in the claw
     does not (0: the paper's reward)."""
+    distance_curriculum: int = 0
+    """Episodes (of each environment) over which the upper end of ``start_distance`` grows linearly from
+    ``curriculum_from`` to its own value: a curriculum on the start distance, close starts first (0: none, the paper)."""
+    curriculum_from: float = 0.03
+    """With ``distance_curriculum``, the upper end of the start distance at the first episode, metres (clipped to
+    ``start_distance``)."""
     observe_capsule: bool = False
     """Append the capsule's pose to the observation (:meth:`ArmPhysics.capsule_pose_features`: its axis and velocity,
     6 numbers) for a Gripper that sees how a pushed capsule lies (False: the paper's 24 numbers, as the shipped skills)."""
@@ -474,6 +480,11 @@ class GripperTask(Task):
             ):
                 raise ValueError(f"GripperTask.{name} must be a range (low, high) with 0 <= low <= high <= {top}, got {v!r}")
             object.__setattr__(self, name, (float(v[0]), float(v[1])))
+        n = self.distance_curriculum
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise ValueError(f"GripperTask.distance_curriculum must be a whole number of episodes >= 0, got "
+                             f"{self.distance_curriculum!r}")  # fmt: skip
+        _positive(self, "curriculum_from")
         if not (isinstance(self.starts_fraction, int | float) and 0 <= self.starts_fraction <= 1):
             raise ValueError(f"GripperTask.starts_fraction must be in [0, 1], got {self.starts_fraction!r}")
         if self.starts is not None:
@@ -489,9 +500,19 @@ class GripperTask(Task):
         else:
             c = _place_capsule(physics, _angle(rng, self.angle_range))
             (d0, d1), (f0, f1) = self.start_distance, self.finger_opening
+            d1 = self.start_distance_high(episode)
             arm_with_hand_at(physics, rng, lambda: c + _upper_offset(rng, d0, d1), fingers=lambda: rng.uniform(f0, f1),
                              tries=200)  # fmt: skip
         self.start_capsule[:] = physics.capsule
+
+    def start_distance_high(self, episode: int) -> float:
+        """The upper end of the start distance at the ``episode``-th episode (0-based): ``start_distance[1]``, or on
+        the curriculum the linear ramp from ``curriculum_from`` (clipped to ``start_distance``) to it."""
+        d0, d1 = self.start_distance
+        if not self.distance_curriculum or episode >= self.distance_curriculum:
+            return d1
+        first = min(max(self.curriculum_from, d0), d1)
+        return first + (d1 - first) * episode / self.distance_curriculum
 
     def reward_terms(self, physics: ArmPhysics) -> dict[str, float]:
         if not self.push_coeff:
