@@ -35,7 +35,7 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
             c = r.config
             key = (c.task, c.macro, json.dumps(c.task_kwargs, sort_keys=True), c.episode_steps)
             if key not in built:
-                env_factory(c.task, c.episode_steps, c.macro, c.trpo.gamma, **c.task_kwargs)().close()
+                env_factory(c.task, c.episode_steps, c.macro, c.advantage.gamma, **c.task_kwargs)().close()
                 built.add(key)
     # Figure 6 is Experiment 1's Manager over the Gripper reward's grid ("Table 6 presents results of Experiment 1");
     # the paper gives no success rate for the flat Gripper.

@@ -42,6 +42,18 @@ def test_training_writes_logs_and_a_checkpoint_that_evaluates(tmp_path):
     assert ev.episodes == 3 and math.isfinite(ev.ret.mean) and ev.success is not None
 
 
+def test_evaluation_uses_the_gripper_start_set_of_a_distance_curriculum_run(tmp_path):
+    kwargs = {"start_distance": [0.0, 0.09], "distance_curriculum": 100_000, "finger_opening": [0.8, 1.0]}
+    list(train(TrainConfig(task="Gripper", task_kwargs=kwargs, **TINY), tmp_path))
+    env = load_trained(tmp_path).make_env()
+    assert env.unwrapped.task.distance_curriculum == 0  # in training the first episodes start within 3 cm
+    far = []
+    for k in range(20):
+        env.reset(seed=k)
+        far.append(env.unwrapped.physics.hand_to_capsule())
+    assert max(far) > 0.05
+
+
 def test_evaluation_uses_the_full_start_set_of_a_curriculum_run(tmp_path):
     cfg = TrainConfig(task="ReachAndGrip2", task_kwargs={"curriculum_alpha": 1e-6}, **TINY)
     list(train(cfg, tmp_path))
@@ -168,11 +180,11 @@ def test_cli_rejects_bad_input_before_any_compute(tmp_path):
     runner = CliRunner()
     for args, message in (
         (["train", "NoSuchTask"], "unknown task"),
-        (["train", "Reacher", "--max-kl", "-0.1"], "max_kl"),
+        (["train", "Reacher", "--max-kl", "-0.1"], "--max-kl must be > 0"),
         (["train", "Reacher", "--batch-steps", "0"], "batch_steps"),
-        (["train", "Reacher", "--fisher-fraction", "0"], "fisher_fraction"),
-        (["train-manager", "ReachAndGrip2", "--skills", "gripper", "--value-iters", "0"], "max_iter"),
-        (["train", "Reacher", "--value-fraction", "1.5"], "value fraction"),
+        (["train", "Reacher", "--fisher-fraction", "0"], "--fisher-fraction must be in (0, 1]"),
+        (["train-manager", "ReachAndGrip2", "--skills", "gripper", "--value-iters", "0"], "--value-iters must be a positive"),
+        (["train", "Reacher", "--value-fraction", "1.5"], "--value-fraction must be in (0, 1]"),
         (["train", "hrlp_test/MultiDiscreteAction-v0"], "unsupported action space"),
         (["eval", str(tmp_path / "missing")], "no checkpoint"),
     ):

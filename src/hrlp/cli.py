@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -12,6 +17,7 @@ from typer.core import TyperGroup
 
 from hrlp import bounds
 from hrlp import cli_params as check
+from hrlp.config import ALGOS, AdvantageConfig, PPOConfig, TrainConfig, TRPOConfig, ValueFitConfig, field_docs
 
 console = Console()
 err_console = Console(stderr=True, soft_wrap=True)  # one-line errors, never wrapped
@@ -351,81 +357,169 @@ def theory(
     run_theory(mdps=mdps, seed=seed, out_dir=out, console=console)
 
 
-_DEFAULT_STEPS = 1_000_000
-_STEPS = Annotated[
-    int | None, typer.Option(help="Low-level environment steps in total (default 1,000,000).", callback=_STEPS_CHECK)
-]
+# --- train and train-manager: their options generated from the config dataclasses ------------------------------------
+#
+# Every field of TrainConfig, TRPOConfig and ValueFitConfig is an option of both commands, named after the field
+# (``--max-kl``; the value fit's fields prefixed ``--value-``), typed by its annotation, defaulting to the dataclass's
+# default, its help the field's docstring (hrlp.config.field_docs), so that the help and the config cannot drift
+# apart. hrlp.config imports neither torch nor gymnasium: ``hrlp --help`` and ``hrlp train --help`` stay fast.
+
+
+@dataclass(frozen=True)
+class _Setting:
+    """A field of a run's config that is an option of ``train`` and ``train-manager``."""
+
+    config: type
+    """The dataclass the field belongs to: ``TrainConfig``, ``TRPOConfig`` or ``ValueFitConfig``."""
+    field: str
+    """The field's name."""
+    option: str
+    """The option's parameter name: ``--option-name`` on the command line, ``ctx.params[option]``."""
+
+
+_LEFT_OUT: dict[type, dict[str, str]] = {
+    TrainConfig: {
+        "task": "the commands' TASK argument, whose help says what each command takes",
+        "advantage": "nested: each AdvantageConfig field is an option of its own",
+        "trpo": "nested: each TRPOConfig field is an option of its own",
+        "ppo": "nested: each PPOConfig field is an option of its own (--ppo-...)",
+        "value": "nested: each ValueFitConfig field is an option of its own (--value-...)",
+        "macro": "a MacroSpec that train-manager's own options build (--skills, --k, --library, --micro..., --handover); "
+        "a flat run has none",
+        "task_kwargs": "given as --task-arg NAME=VALUE, repeatable (a dict has no one-token form), below",
+        "init_from": "set by 'hrlp dagger', which warm-starts a skill's retraining; a fresh run starts from a fresh "
+        "network and an interrupted one continues with --resume",
+    },
+}
+"""The config fields that are deliberately not generated options, and why."""
+
+_OPTION_NAMES = {(ValueFitConfig, "max_iter"): "value_iters", (ValueFitConfig, "fraction"): "value_fraction"}
+"""Options named otherwise than their field: the value fit's first two options predate the generated ones."""
+
+_NESTED: dict[type, str] = {AdvantageConfig: "advantage", TRPOConfig: "trpo", PPOConfig: "ppo", ValueFitConfig: "value"}
+"""TrainConfig's nested records, by the field that holds each."""
+
+_PREFIXES = {ValueFitConfig: "value_", PPOConfig: "ppo_"}
+"""Option-name prefixes of the records whose field names would clash with another's (``--ppo-entropy-coef``)."""
+
+_SETTINGS: tuple[_Setting, ...] = tuple(
+    _Setting(config, f.name, _OPTION_NAMES.get((config, f.name), _PREFIXES.get(config, "") + f.name))
+    for config in (TrainConfig, *_NESTED)
+    for f in dataclasses.fields(config)
+    if f.name not in _LEFT_OUT.get(config, {})
+)
+"""The generated options of ``train`` and ``train-manager``, in the fields' order."""
+
+_PANELS = {TrainConfig: "Run (TrainConfig)", AdvantageConfig: "Advantages (AdvantageConfig)", TRPOConfig: "TRPO (TRPOConfig)",
+           PPOConfig: "PPO (PPOConfig, with --algo ppo)", ValueFitConfig: "Value fit (ValueFitConfig)"}  # fmt: skip
+"""The help's section for each dataclass's options."""
+
+_OPTION_TYPES: dict[str, Any] = {"int": int, "float": float, "bool": bool, "str": str, "int | None": int | None,
+                                 "tuple[int, ...]": str}  # fmt: skip
+"""The option's type for a field's annotation; a tuple of integers is given as ``64,64`` (:func:`check.widths`)."""
+
+_CHECKS: dict[str, check.Check] = {  # the bounds checked while the options are parsed, in hrlp.bounds' words
+    "steps": _STEPS_CHECK,
+    "batch_steps": _BATCH_CHECK,
+    "num_envs": check.count(1, bounds.MAX_NUM_ENVS, bounds.WHY_NUM_ENVS),
+    "workers": check.workers(),
+    "seed": check.seed(),
+    "episode_steps": check.count(1),
+    "hidden": check.widths,
+    "init_log_std": check.real(),
+    "episodes": check.count(1, bounds.MAX_STEPS, bounds.WHY_STEPS, "number of episodes"),
+    "reward_scale": check.real(0.0, low_open=True),
+    "max_kl": check.real(0.0, low_open=True),
+    "cg_iters": check.count(1, 1000, "each iteration is a Fisher-vector product over the batch"),
+    "cg_damping": check.real(0.0),
+    "cg_residual_tol": check.real(0.0),
+    "line_search_backtracks": check.count(1),
+    "line_search_shrink": check.real(0.0, 1.0, low_open=True, high_open=True),
+    "gamma": check.real(0.0, 1.0),
+    "gae_lambda": check.real(0.0, 1.0),
+    "entropy_coef": check.real(0.0),
+    "fisher_fraction": check.real(0.0, 1.0, low_open=True),
+    "algo": check.choice(ALGOS),
+    "ppo_clip": check.real(0.0, low_open=True),
+    "ppo_epochs": check.count(1, 1000, "each epoch is a pass over the batch"),
+    "ppo_minibatches": check.count(1),
+    "ppo_lr": check.real(0.0, low_open=True),
+    "ppo_max_grad_norm": check.real(0.0),
+    "ppo_target_kl": check.real(0.0),
+    "ppo_entropy_coef": check.real(0.0),
+    "value_iters": check.count(1),
+    "value_l2_coef": check.real(0.0),
+    "value_history_size": check.count(1),
+    "value_fraction": check.real(0.0, 1.0, low_open=True),
+}
+"""Each generated option's check while parsed; TRPOConfig's and ValueFitConfig's own checks follow
+(:func:`check.config_field`). TrainConfig's checks that combine fields run before torch is imported
+(:func:`_check_numbers`) and when the config is built."""
+
+
+def _parameter(setting: _Setting, default: Any) -> inspect.Parameter:
+    """The command parameter of a generated option: ``Annotated[type, typer.Option(...)] = default``."""
+    field = next(f for f in dataclasses.fields(setting.config) if f.name == setting.field)
+    kind = _OPTION_TYPES[str(field.type)]  # a field of another type needs an entry there, or a place in _LEFT_OUT
+    first = _CHECKS.get(setting.option)
+    callback = first if setting.config is TrainConfig else check.config_field(setting.config, setting.field, first)
+    option = typer.Option(
+        help=field_docs(setting.config).get(setting.field, ""),
+        callback=callback,
+        rich_help_panel=_PANELS[setting.config],
+        metavar="W,W,..." if kind is str else None,
+    )
+    if isinstance(default, tuple):  # hidden layer widths: shown and given as 64,64
+        default = ",".join(map(str, default))
+    return inspect.Parameter(setting.option, inspect.Parameter.KEYWORD_ONLY, default=default,
+                             annotation=Annotated[kind, option])  # fmt: skip
+
+
+def _settings_options(**defaults: Any) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """Give a command (``def command(ctx, ..., **settings)``) the generated options of :data:`_SETTINGS` after its own:
+    one keyword parameter per setting, default the dataclass's unless ``defaults`` names another for this command
+    (``train-manager``'s batch of 5,000 decisions)."""
+    if unknown := set(defaults) - {s.option for s in _SETTINGS}:
+        raise TypeError(f"no generated options {sorted(unknown)}")
+
+    def add(command: Callable[..., None]) -> Callable[..., None]:
+        own = inspect.signature(command, eval_str=True)
+        params = [p for p in own.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+        if clash := {p.name for p in params} & {s.option for s in _SETTINGS}:
+            raise TypeError(f"{command.__name__}: options {sorted(clash)} are generated from the config")
+        for s in _SETTINGS:
+            field = next(f for f in dataclasses.fields(s.config) if f.name == s.field)
+            params.append(_parameter(s, defaults.get(s.option, field.default)))
+
+        @functools.wraps(command)
+        def run(**kwargs: Any) -> None:
+            command(**kwargs)
+
+        run.__signature__ = own.replace(parameters=params)  # type: ignore[attr-defined]
+        run.__annotations__ = {p.name: p.annotation for p in params}
+        return run
+
+    return add
+
+
+def _config_kwargs(params: dict[str, Any], config: type) -> dict[str, Any]:
+    """The fields of ``config`` given by the generated options in ``params`` (a command's ``ctx.params``)."""
+    return {s.field: params[s.option] for s in _SETTINGS if s.config is config}
+
+
 _SEED = Annotated[int, typer.Option(help="Seed of environments, network and action noise.", callback=check.seed())]
-_RUN_DIR = Annotated[
-    Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).", callback=check.out_dir)
-]
-_NUM_ENVS = Annotated[
-    int,
-    typer.Option(
-        help=f"Environments stepped together with batched inference (at most {bounds.MAX_NUM_ENVS:,}).",
-        callback=check.count(1, bounds.MAX_NUM_ENVS, bounds.WHY_NUM_ENVS),
-    ),
-]
-_MAX_KL = Annotated[float, typer.Option(help="TRPO's trust region, the maximal mean KL per step.")]
-_GAMMA = Annotated[float, typer.Option(help="Discount factor (per low-level step).")]
-_EPISODE_STEPS = Annotated[
-    int | None,
-    typer.Option(
-        help="Episode length (hrlp tasks: default 300; a Gymnasium id: its time limit, default its own).",
-        callback=check.count(1),
-    ),
-]
-_TASK_ARG = Annotated[
-    list[str] | None,
-    typer.Option("--task-arg", help="A task argument NAME=VALUE, repeatable, e.g. --task-arg c1=-10 --task-arg tr=0.06."),
-]
 _WORKERS = Annotated[
     int,
     typer.Option(
         help="Processes sampling at the same time (e.g. one per core); 1: in this process.", callback=check.workers()
     ),
 ]
-_INIT_LOG_STD = Annotated[float, typer.Option(help="Initial log std of the Gaussian action noise.")]
-_VALUE_ITERS = Annotated[int, typer.Option(help="L-BFGS iterations of the baseline fit per iteration (modular_rl: 25).")]
-_VALUE_FRACTION = Annotated[
-    float, typer.Option(help="Share of the batch's time steps the baseline is fitted on (1: every one, the default).")
+_RUN_DIR = Annotated[
+    Path | None, typer.Option(help="Where logs and checkpoints go (default runs/TASK-sSEED).", callback=check.out_dir)
 ]
-_FISHER_FRACTION = Annotated[
-    float, typer.Option(help="Share of the batch the Fisher-vector products use (TRPO paper: 0.1; 1: exact, the default).")
-]
-_EPISODES = Annotated[
-    int | None,
-    typer.Option(
-        help="Training episodes in total: the run stops at --steps or --episodes, whichever comes first (default: no "
-        "episode budget).",
-        callback=check.count(1, bounds.MAX_STEPS, bounds.WHY_STEPS, "number of episodes"),
-    ),
-]
-_REWARD_SCALE = Annotated[
-    float,
-    typer.Option(
-        help="Factor on the rewards for training only (advantages, baseline); logs and 'hrlp eval' keep the task's units.",
-        callback=check.real(0.0, low_open=True),
-    ),
-]
-_ENTROPY_COEF = Annotated[
-    float, typer.Option(help="Weight of the entropy bonus in TRPO's surrogate (TRPO as published: 0).", callback=check.real())
-]
-_GAE_LAMBDA = Annotated[
-    float, typer.Option(help="GAE's lambda (modular_rl's runs: 0.97; 1: Monte-Carlo returns).", callback=check.real(0.0, 1.0))
-]
-_CG_ITERS = Annotated[
-    int,
-    typer.Option(
-        help="Conjugate-gradient iterations of TRPO's natural-gradient step (modular_rl: 10).",
-        callback=check.count(1, 1000, "each iteration is a Fisher-vector product over the batch"),
-    ),
-]
-_CG_DAMPING = Annotated[
-    float,
-    typer.Option(
-        help="Damping added to the Fisher matrix in conjugate gradient (modular_rl's runs: 0.1).", callback=check.real(0.0)
-    ),
+_TASK_ARG = Annotated[
+    list[str] | None,
+    typer.Option("--task-arg", help="A task argument NAME=VALUE, repeatable, e.g. --task-arg c1=-10 --task-arg tr=0.06."),
 ]
 _RESUME = Annotated[
     bool, typer.Option(help="Continue the run in --run-dir from its last checkpoint with its own settings (--steps may grow).")
@@ -433,48 +527,33 @@ _RESUME = Annotated[
 
 
 @app.command()
+@_settings_options()
 def train(
     ctx: typer.Context,
     task: Annotated[
         str,
         typer.Argument(help="hrlp task (see 'hrlp tasks'), a Gymnasium id, or MODULE:ID (the module registers the id)."),
     ],
-    steps: _STEPS = None,
-    seed: _SEED = 0,
     run_dir: _RUN_DIR = None,
-    batch_steps: Annotated[
-        int, typer.Option(help="Environment steps per TRPO iteration (paper: 50,000).", callback=_BATCH_CHECK)
-    ] = 50_000,
-    num_envs: _NUM_ENVS = 16,
-    max_kl: _MAX_KL = 0.01,
-    gamma: _GAMMA = 0.99,
-    episode_steps: _EPISODE_STEPS = None,
     task_arg: _TASK_ARG = None,
-    init_log_std: _INIT_LOG_STD = 0.0,
-    fisher_fraction: _FISHER_FRACTION = 1.0,
-    value_iters: _VALUE_ITERS = 25,
-    value_fraction: _VALUE_FRACTION = 1.0,
-    workers: _WORKERS = 1,
-    episodes: _EPISODES = None,
-    reward_scale: _REWARD_SCALE = 1.0,
-    entropy_coef: _ENTROPY_COEF = 0.0,
-    gae_lambda: _GAE_LAMBDA = 0.97,
-    cg_iters: _CG_ITERS = 10,
-    cg_damping: _CG_DAMPING = 0.1,
     resume: _RESUME = False,
+    **settings: Any,
 ) -> None:
-    """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration."""
+    """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration.
+
+    The options of the run, TRPO and the value baseline are the fields of TrainConfig, TRPOConfig and ValueFitConfig
+    (hrlp.config), with their defaults."""
     if not resume:  # before torch is imported: the task, its arguments and spaces (a resume uses the run's own)
         note = _episode_length_defaults(ctx, task)
         _check_numbers(ctx)
-        _check_task(task, episode_steps, task_arg, ctx)
+        _check_task(task, settings["episode_steps"], task_arg, ctx)
         if note:  # after the checks: an error stays the one line
             err_console.print(note, soft_wrap=True, highlight=False)
-    settings, trpo = _run_settings(ctx.params)  # short-episode settings, where chosen, are in ctx.params
-    _train(settings, task_arg, trpo, run_dir, resume, steps, ctx)
+    _train(ctx, None, run_dir, resume, task_arg)  # short-episode settings, where chosen, are in ctx.params
 
 
 @app.command("train-manager")
+@_settings_options(batch_steps=5_000)  # the paper's Manager batch (TrainConfig's default is the flat runs' 50,000)
 def train_manager(
     ctx: typer.Context,
     task: Annotated[str, typer.Argument(help="hrlp task the Manager solves, e.g. ReachAndGrip2.")],
@@ -507,31 +586,15 @@ def train_manager(
             "open (docs/skills.md); --no-handover: the paper's absolute goals, skills run as trained."
         ),
     ] = True,
-    steps: _STEPS = None,
-    seed: _SEED = 0,
     run_dir: _RUN_DIR = None,
-    batch_steps: Annotated[
-        int, typer.Option(help="Manager decisions per TRPO iteration (paper: 5,000).", callback=_BATCH_CHECK)
-    ] = 5_000,
-    num_envs: _NUM_ENVS = 16,
-    max_kl: _MAX_KL = 0.01,
-    gamma: _GAMMA = 0.99,
-    episode_steps: _EPISODE_STEPS = None,
     task_arg: _TASK_ARG = None,
-    init_log_std: _INIT_LOG_STD = 0.0,
-    fisher_fraction: _FISHER_FRACTION = 1.0,
-    value_iters: _VALUE_ITERS = 25,
-    value_fraction: _VALUE_FRACTION = 1.0,
-    workers: _WORKERS = 1,
-    episodes: _EPISODES = None,
-    reward_scale: _REWARD_SCALE = 1.0,
-    entropy_coef: _ENTROPY_COEF = 0.0,
-    gae_lambda: _GAE_LAMBDA = 0.97,
-    cg_iters: _CG_ITERS = 10,
-    cg_damping: _CG_DAMPING = 0.1,
     resume: _RESUME = False,
+    **settings: Any,
 ) -> None:
-    """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration."""
+    """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration.
+
+    The options of the run, TRPO and the value baseline are the fields of TrainConfig, TRPOConfig and ValueFitConfig
+    (hrlp.config), with their defaults (but 5,000 decisions per batch)."""
     if not resume:  # options the Manager would silently ignore (with --resume they are compared with the run's)
         if ignored := [f"--{n.replace('_', '-')}" for n in ("micro_duration", "micro_penalty", "micro_max_torque")
                        if not micro and _given(ctx, n)]:  # fmt: skip
@@ -541,7 +604,7 @@ def train_manager(
         if k is not None and not skills.strip():
             raise ValueError("--k sets how long each skill runs, and this Manager has no skills (--skills)")
         _check_numbers(ctx)  # before torch is imported
-        _check_task(task, episode_steps, task_arg, ctx)
+        _check_task(task, settings["episode_steps"], task_arg, ctx)
     from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 
     try:
@@ -552,34 +615,7 @@ def train_manager(
         if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
             raise
         spec = None
-    settings, trpo = _run_settings({**ctx.params, "macro": spec})
-    _train(settings, task_arg, trpo, run_dir, resume, steps, ctx)
-
-
-_RUN_SETTINGS = (
-    "task",
-    "seed",
-    "batch_steps",
-    "num_envs",
-    "episode_steps",
-    "init_log_std",
-    "workers",
-    "value_iters",
-    "value_fraction",
-    "episodes",
-    "reward_scale",
-    "macro",
-)
-"""Options of ``train``/``train-manager`` that are settings of the run (``TrainConfig``'s, the value fit's two)."""
-_TRPO_SETTINGS = ("max_kl", "gamma", "fisher_fraction", "entropy_coef", "gae_lambda", "cg_iters", "cg_damping")
-"""Options of ``train``/``train-manager`` that are ``TRPOConfig``'s fields, named as they are."""
-
-
-def _run_settings(params: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The run's settings and TRPO's from the command's parsed options (``--steps`` left out: the default)."""
-    settings = {name: params[name] for name in _RUN_SETTINGS if name in params}
-    settings["steps"] = _DEFAULT_STEPS if params.get("steps") is None else params["steps"]
-    return settings, {name: params[name] for name in _TRPO_SETTINGS}
+    _train(ctx, spec, run_dir, resume, task_arg)
 
 
 def parse_task_args(items: list[str] | None) -> dict[str, Any]:
@@ -600,27 +636,22 @@ def parse_task_args(items: list[str] | None) -> dict[str, Any]:
     return out
 
 
-def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: dict[str, float], run_dir: Path | None,
-           resume: bool, steps: int | None, ctx: typer.Context | None = None) -> Path:  # fmt: skip
-    """Shared body of ``train`` and ``train-manager``: build and check the config, then train with a progress bar.
+def _train(ctx: typer.Context, macro: Any, run_dir: Path | None, resume: bool, task_arg: list[str] | None) -> Path:
+    """Shared body of ``train`` and ``train-manager``: build and check the config from the options in ``ctx.params``
+    (and a Manager's ``macro``, a MacroSpec), then train with a progress bar.
 
     With ``--resume`` the run continues with its own settings: options left out take the run's values, and an option
-    given on the command line that differs from the run's is refused with one line naming it (only ``--steps`` may
-    change); ``train`` refuses a Manager run and ``train-manager`` a flat one."""
-    import dataclasses
-
-    from hrlp.algos.trpo import TRPOConfig
-    from hrlp.algos.value import ValueFitConfig
+    given on the command line that differs from the run's is refused with one line naming it (only ``--steps`` and
+    ``--episodes`` may change); ``train`` refuses a Manager run and ``train-manager`` a flat one."""
     from hrlp.atomic import StorageError
     from hrlp.checkpoint import CheckpointError, checkpoint_exists
-    from hrlp.train import TrainConfig, env_factory, train_with_progress
+    from hrlp.train import env_factory, train_with_progress
 
-    task = settings["task"]
-    out = run_dir or Path("runs") / f"{task.replace('/', '_').replace(':', '_')}-s{settings['seed']}"
-    manager_command = settings.get("macro") is not None or (ctx is not None and ctx.info_name == "train-manager")
+    p = ctx.params
+    task = p["task"]
+    out = run_dir or Path("runs") / f"{task.replace('/', '_').replace(':', '_')}-s{p['seed']}"
+    manager_command = macro is not None or ctx.info_name == "train-manager"
     try:
-        if steps is not None and steps <= 0:
-            raise ValueError(f"--steps must be a positive number of environment steps, got {steps}")
         if resume:
             from hrlp.checkpoint import load_checkpoint
 
@@ -641,15 +672,15 @@ def _train(settings: dict[str, Any], task_arg: list[str] | None, trpo_settings: 
                 raise ValueError(f"--resume: {out} was trained with other settings: {', '.join(differences)}; only --steps "
                                  "and --episodes may change (leave the other options out to continue with the run's "
                                  "own)")  # fmt: skip
-            episodes = settings.get("episodes") if ctx is not None and _given(ctx, "episodes") else saved.episodes
-            cfg = dataclasses.replace(saved, steps=saved.steps if steps is None else steps, episodes=episodes)
+            budgets = {name: p[name] for name in ("steps", "episodes") if _given(ctx, name)}  # else the run's own
+            cfg = dataclasses.replace(saved, **budgets)
         else:
             if checkpoint_exists(out / "checkpoint"):
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
-            trpo = TRPOConfig(**trpo_settings)
-            value = ValueFitConfig(max_iter=settings.pop("value_iters"), fraction=settings.pop("value_fraction"))
-            cfg = TrainConfig(**settings, trpo=trpo, value=value, task_kwargs=parse_task_args(task_arg))
-        env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
+            nested = {name: config(**_config_kwargs(p, config)) for config, name in _NESTED.items()}
+            cfg = TrainConfig(task=task, **_config_kwargs(p, TrainConfig), **nested, macro=macro,
+                              task_kwargs=parse_task_args(task_arg))  # fmt: skip
+        env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **cfg.task_kwargs)
     except CheckpointError as e:
         raise ValueError(str(e)) from None
     kind = "train-manager" if cfg.macro is not None else "train"
@@ -785,11 +816,13 @@ def _show(value: Any) -> str:
     return str(value)
 
 
-def _replace_trpo(name: str) -> tuple[Any, Any]:
+def _replace_nested(record: str, name: str) -> tuple[Any, Any]:
     import dataclasses
 
-    return (lambda c: getattr(c.trpo, name),
-            lambda c, v, p: dataclasses.replace(c, trpo=dataclasses.replace(c.trpo, **{name: v})))  # fmt: skip
+    def put(c: Any, v: Any, p: dict[str, Any]) -> Any:
+        return dataclasses.replace(c, **{record: dataclasses.replace(getattr(c, record), **{name: v})})
+
+    return lambda c: getattr(getattr(c, record), name), put
 
 
 def _replace_top(name: str) -> tuple[Any, Any]:
@@ -856,13 +889,6 @@ def _task_accessor() -> tuple[Any, Any]:
     return lambda c: c.task, put
 
 
-def _value_accessor(field: str) -> tuple[Any, Any]:
-    import dataclasses
-
-    return (lambda c: getattr(c.value, field),
-            lambda c, v, p: dataclasses.replace(c, value=dataclasses.replace(c.value, **{field: v})))  # fmt: skip
-
-
 def _task_args_accessor() -> tuple[Any, Any]:
     import dataclasses
 
@@ -872,14 +898,16 @@ def _task_args_accessor() -> tuple[Any, Any]:
     return show, lambda c, v, p: dataclasses.replace(c, task_kwargs=parse_task_args(v))
 
 
+def _setting_accessor(setting: _Setting) -> tuple[Any, Any]:
+    if setting.config is TrainConfig:
+        return _replace_top(setting.field)
+    return _replace_nested(_NESTED[setting.config], setting.field)
+
+
 #: How each defining option of ``train``/``train-manager`` reads (for the message) and sets (to compare) a saved config.
 _RESUME_ACCESSORS: dict[str, tuple[Any, Any]] = {
     "task": _task_accessor(),
-    **{name: _replace_top(name) for name in ("seed", "batch_steps", "num_envs", "episode_steps", "init_log_std", "workers")},
-    **{name: _replace_top(name) for name in ("episodes", "reward_scale")},
-    **{name: _replace_trpo(name) for name in _TRPO_SETTINGS},
-    "value_iters": _value_accessor("max_iter"),
-    "value_fraction": _value_accessor("fraction"),
+    **{s.option: _setting_accessor(s) for s in _SETTINGS},
     "task_arg": _task_args_accessor(),
     "skills": _replace_macro("skills", lambda v: tuple(s.strip() for s in v.split(",") if s.strip())),
     "k": _replace_macro("k"),

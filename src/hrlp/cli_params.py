@@ -70,6 +70,50 @@ def real(low: float | None = None, high: float | None = None, low_open: bool = F
     return check
 
 
+def choice(names: tuple[str, ...]) -> Check:
+    """An option whose value is one of ``names``."""
+
+    def check(param: typer.CallbackParam, value: Any) -> Any:
+        if value is not None and value not in names:
+            raise BoundError(f"{_flag(param)} must be one of {', '.join(names)}, got {value!r}")
+        return value
+
+    return check
+
+
+def widths(param: typer.CallbackParam, value: Any) -> Any:
+    """Layer widths written ``64,64`` (a string, as the option is given) -> ``(64, 64)``: positive integers."""
+    if not isinstance(value, str):
+        return value
+    try:
+        out = tuple(int(w) for w in value.split(","))
+    except ValueError:
+        out = ()
+    if not out or any(w < 1 for w in out):
+        raise BoundError(f"{_flag(param)} must be positive layer widths separated by commas, e.g. 64,64, got {value!r}")
+    return out
+
+
+def config_field(config: type, name: str, first: Check | None = None) -> Check:
+    """The option that sets field ``name`` of the dataclass ``config`` (one whose fields are checked each on its own,
+    as :class:`~hrlp.config.TRPOConfig`'s are): ``first`` (e.g. :func:`real`'s bounds, in their words), then the
+    dataclass's own check, ``config(name=value)``, so that no value the config refuses gets past the parser."""
+
+    def check(param: typer.CallbackParam, value: Any) -> Any:
+        if first is not None:
+            value = first(param, value)
+        try:
+            config(**{name: value})
+        except (ValueError, TypeError) as e:
+            message = str(e)
+            if message.startswith(f"{name} "):  # "max_kl must be ..." -> "--max-kl must be ..."
+                raise BoundError(f"{_flag(param)}{message[len(name) :]}") from None
+            raise BoundError(f"{_flag(param)}: {message}") from None
+        return value
+
+    return check
+
+
 def out_dir(param: typer.CallbackParam, value: Path | None) -> Path | None:
     """A directory hrlp writes into (created if missing): neither it nor any directory above it may be a file."""
     if value is None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import dataclasses
 import functools
 import json
 import math
@@ -26,10 +25,9 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from hrlp import bounds
 from hrlp.algos.kernels import gae
-from hrlp.algos.trpo import TRPOConfig, trpo_update
-from hrlp.algos.value import ValueFitConfig, fit_value
+from hrlp.algos.update import make_update
+from hrlp.algos.value import fit_value
 from hrlp.atomic import atomic_path, directory_lock, writing
 from hrlp.checkpoint import (
     META_FILE,
@@ -42,122 +40,11 @@ from hrlp.checkpoint import (
     save_checkpoint,
     unpack_generators,
 )
+from hrlp.config import ALGOS, TrainConfig  # torch-free (for `hrlp --help`); importable from here as before
 from hrlp.policies.mlp import GaussianPolicy, Policy, ValueNet, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import NonFiniteError, ParallelSampler, Sampler, action_decoder, first_non_finite, mean_or_nan
 from hrlp.skills.macro_env import MacroEnv, MacroSpec
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """Settings of a TRPO run, flat or Manager (defaults from the paper's Appendix D)."""
-
-    task: str
-    """An hrlp task name (``hrlp tasks``) or a Gymnasium id, e.g. Pusher-v5."""
-    steps: int = 1_000_000
-    """Low-level environment steps in total (a Manager's macro-action of tau steps counts tau)."""
-    batch_steps: int = 50_000
-    """Decisions per TRPO iteration (the paper: 50,000 for flat runs, 5,000 for Managers)."""
-    num_envs: int = 16
-    """Environments stepped together with batched inference."""
-    workers: int = 1
-    """Processes that sample at the same time, each stepping its share of the environments (1: in this process)."""
-    seed: int = 0
-    """Seed of the environments, the network initialisation and the action noise."""
-    episode_steps: int | None = None
-    """Episode length for hrlp tasks (None: the task's default, 300)."""
-    hidden: tuple[int, ...] = (64, 64)
-    """Hidden layer widths of the policy and value networks."""
-    init_log_std: float = 0.0
-    """Initial log standard deviation of the policy's Gaussian action noise (0: std 1 on [-1, 1] torques)."""
-    trpo: TRPOConfig = field(default_factory=TRPOConfig)
-    """TRPO settings (max KL 0.01, gamma 0.99, ...)."""
-    value: ValueFitConfig = field(default_factory=ValueFitConfig)
-    """Value-baseline fit settings."""
-    macro: MacroSpec | None = None
-    """For a Manager: its skills, their duration k and the micro-action; None for a flat policy."""
-    task_kwargs: dict[str, Any] = field(default_factory=dict)
-    """Arguments of the task, e.g. ``{"c1": -10.0}`` (Gripper reward constants) or ``{"curriculum_alpha": 1e-4}``."""
-    init_from: str | None = None
-    """For a flat run: a skill (a name in the libraries a Manager searches, or a skill directory) whose policy and
-    observation statistics the run starts from instead of a fresh network (DAgger retraining, ``hrlp dagger``)."""
-    episodes: int | None = None
-    """Training episodes in total (None: no episode budget). The run stops after the iteration in which ``steps`` or
-    ``episodes`` is reached, whichever comes first; an episode counts when it ends (terminated or truncated)."""
-    reward_scale: float = 1.0
-    """Factor on every reward before advantages and value targets are computed: training only. Logged returns,
-    success and evaluation (``hrlp eval``) stay in the task's own units."""
-
-    def __post_init__(self) -> None:
-        for name in ("steps", "batch_steps", "num_envs", "workers"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        if self.workers > self.num_envs:
-            raise ValueError(f"workers ({self.workers}) must be at most num_envs ({self.num_envs})")
-        if self.batch_steps < self.num_envs:
-            raise ValueError(f"batch_steps ({self.batch_steps}) must be at least num_envs ({self.num_envs})")
-        if self.episode_steps is not None and (not isinstance(self.episode_steps, int) or self.episode_steps <= 0):
-            raise ValueError(f"episode_steps must be a positive integer, got {self.episode_steps!r}")
-        if not self.hidden or any(h <= 0 for h in self.hidden):
-            raise ValueError(f"hidden must be positive layer widths, got {self.hidden!r}")
-        if not (isinstance(self.init_log_std, int | float) and math.isfinite(self.init_log_std)):
-            raise ValueError(f"init_log_std must be a finite number, got {self.init_log_std!r}")
-        if self.episodes is not None and (isinstance(self.episodes, bool) or not isinstance(self.episodes, int)
-                                          or self.episodes <= 0):  # fmt: skip
-            raise ValueError(f"episodes must be a positive integer (or None: no episode budget), got {self.episodes!r}")
-        if not (isinstance(self.reward_scale, int | float) and math.isfinite(self.reward_scale) and self.reward_scale > 0):
-            raise ValueError(f"reward_scale must be a positive finite number, got {self.reward_scale!r}")
-        if not isinstance(self.task_kwargs, dict) or not all(isinstance(k, str) for k in self.task_kwargs):
-            raise ValueError(f"task_kwargs must map argument names to values, got {self.task_kwargs!r}")
-        self._check_bounds()
-
-    def _check_bounds(self) -> None:
-        """What a config may ask for (:mod:`hrlp.bounds`), and settings that would be silently meaningless."""
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= bounds.MAX_SEED:
-            raise ValueError(f"seed must be an integer in [0, {bounds.MAX_SEED}] (seeds are 32-bit), got {self.seed!r}")
-        for name, high, why in (("steps", bounds.MAX_STEPS, bounds.WHY_STEPS),
-                                ("batch_steps", bounds.MAX_BATCH_STEPS, bounds.WHY_BATCH_STEPS),
-                                ("num_envs", bounds.MAX_NUM_ENVS, bounds.WHY_NUM_ENVS)):  # fmt: skip
-            if (problem := bounds.count_problem(getattr(self, name), 1, high, why)) is not None:
-                raise ValueError(f"{name} {problem}")
-        if "episode_steps" in self.task_kwargs:
-            raise ValueError("give the episode length as episode_steps (--episode-steps), not as a task argument")
-        batch = self.steps_per_env * self.num_envs
-        problems = [
-            bounds.fraction_problem("fisher_fraction", self.trpo.fisher_fraction, batch, "decisions"),
-            bounds.fraction_problem("value fraction", self.value.fraction, self.steps_per_env, "time steps"),
-        ]
-        if self.macro is not None:
-            from hrlp.envs.check import default_episode_steps
-
-            episode = self.episode_steps or default_episode_steps()
-            micro = None if self.macro.micro is None else self.macro.micro.duration
-            problems += [
-                bounds.duration_problem("k", self.macro.k, episode),
-                bounds.duration_problem("the micro-action's duration", micro, episode),
-            ]
-        if problem := next((p for p in problems if p is not None), None):
-            raise ValueError(problem)
-
-    @property
-    def steps_per_env(self) -> int:
-        """Decisions each environment takes per iteration."""
-        return math.ceil(self.batch_steps / self.num_envs)
-
-    def to_json(self) -> dict[str, Any]:
-        """A JSON-serialisable dict of every setting."""
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_json(cls, d: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_json`."""
-        d = dict(d)
-        d["hidden"] = tuple(d["hidden"])
-        d["trpo"] = TRPOConfig(**d["trpo"])
-        d["value"] = ValueFitConfig(**d["value"])
-        d["macro"] = MacroSpec.from_json(d["macro"]) if d.get("macro") else None
-        return cls(**d)
 
 
 def env_factory(
@@ -244,7 +131,7 @@ class Trainer:
 
     def __init__(self, cfg: TrainConfig) -> None:
         self.cfg = cfg
-        factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)
+        factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **cfg.task_kwargs)
         torch.manual_seed(cfg.seed)
         probe = factory()
         obs_dim = int(np.prod(probe.observation_space.shape))
@@ -269,6 +156,8 @@ class Trainer:
             self.sampler = ParallelSampler(envs, self.policy, self.normalizer, seed=cfg.seed, workers=cfg.workers)
         else:
             self.sampler = Sampler(envs, self.policy, self.normalizer, seed=cfg.seed)
+        self.update = make_update(cfg, self.policy)
+        """The policy step (TRPO or PPO, ``cfg.algo``)."""
         self.iteration = 0
         self.env_steps = 0
         self.episodes_done = 0
@@ -307,17 +196,12 @@ class Trainer:
             values = self.value_net(obs).reshape(T, N)
             next_values = self.value_net(batch.next_obs.reshape(T * N, D)).reshape(T, N)
         rewards = batch.rewards if cfg.reward_scale == 1 else batch.rewards * cfg.reward_scale  # training only
-        adv = gae(rewards, values, next_values, batch.terminated, batch.truncated, cfg.trpo.gamma, cfg.trpo.gae_lambda,
+        a = cfg.advantage
+        adv = gae(rewards, values, next_values, batch.terminated, batch.truncated, a.gamma, a.gae_lambda,
                   discount=batch.discount)  # fmt: skip
         self._check_value_targets(values, next_values, adv.advantages, adv.returns)
         actions = batch.actions.reshape(T * N, *batch.actions.shape[2:])
-        with torch.no_grad():
-            old_dist = self.policy(obs)
-        stride = round(1 / cfg.trpo.fisher_fraction)
-        stats = trpo_update(
-            list(self.policy.parameters()), lambda: self.policy(obs), old_dist, actions, adv.advantages.reshape(-1), cfg.trpo,
-            fisher_dist_fn=None if stride == 1 else lambda: self.policy(obs[::stride]),
-        )  # fmt: skip
+        stats = self.update(obs, actions, adv.advantages.reshape(-1))
         vstride = round(1 / cfg.value.fraction)  # whole time steps, so every environment's episodes stay in the fit
         self.pending_value_fit = (batch.obs[::vstride].reshape(-1, D), adv.returns[::vstride].reshape(-1).detach())
         if self._update_threads is not None:
@@ -336,7 +220,7 @@ class Trainer:
             "episode_length": mean_or_nan([e.length for e in episodes]),
             "success_rate": mean_or_nan([e.success for e in episodes]),
             "target_dist_sum": mean_or_nan([e.target_dist_sum for e in episodes]),
-            **{f"trpo/{k}": float(v) for k, v in stats.to_dict().items()},
+            **{f"{self.update.name}/{k}": v for k, v in stats.items()},
             "value/explained_variance_before": math.nan if vstats is None else vstats.explained_variance_before,
             "value/explained_variance_after": math.nan if vstats is None else vstats.explained_variance_after,
             "time/env_share": (timing.env - env0) / wall,
@@ -375,6 +259,7 @@ class Trainer:
         tensors.update({f"normalizer.{k}": v for k, v in self.normalizer.state_dict().items()})
         rng_tensors, rng_meta = pack_generators({}, self._generators())
         tensors.update(rng_tensors)
+        tensors.update(self.update.state())
         if self.pending_value_fit is not None:
             tensors["pending_value_fit.obs"], tensors["pending_value_fit.returns"] = self.pending_value_fit
         meta = {
@@ -410,6 +295,8 @@ class Trainer:
         trainer.normalizer.load_state_dict({k.removeprefix("normalizer."): v for k, v in tensors.items()
                                             if k.startswith("normalizer.")})  # fmt: skip
         unpack_generators(tensors, meta, {}, trainer._generators())
+        if cfg.algo != "trpo":
+            trainer.update.load_state(tensors)
         trainer.sampler.set_state(meta["sampler"])
         trainer.iteration, trainer.env_steps = int(meta["iteration"]), int(meta["env_steps"])
         trainer.episodes_done = int(meta.get("episodes_done", 0))  # checkpoints before the episode budget lack it
@@ -486,9 +373,9 @@ def check_skill_hashes(saved: dict[str, str], loaded: dict[str, str], where: Pat
 
 
 #: Task arguments that shape training only; evaluation and rendering leave them out. The angle curriculum of
-#: Section 4.3.2 narrows the start set for the first episodes of every environment, so a fresh evaluation
-#: environment would otherwise see only the easiest starts.
-TRAINING_ONLY_TASK_ARGS = frozenset({"curriculum_alpha"})
+#: Section 4.3.2 and the Gripper's start-distance curriculum narrow the start set for the first episodes of every
+#: environment, so a fresh evaluation environment would otherwise see only the easiest starts.
+TRAINING_ONLY_TASK_ARGS = frozenset({"curriculum_alpha", "distance_curriculum", "curriculum_from"})
 
 
 @dataclass
@@ -508,7 +395,7 @@ class TrainedPolicy:
         a run is evaluated and shown on the task's full start distribution."""
         cfg = self.config
         task_kwargs = {k: v for k, v in cfg.task_kwargs.items() if k not in TRAINING_ONLY_TASK_ARGS}
-        return env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **{**task_kwargs, **kwargs})()
+        return env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **{**task_kwargs, **kwargs})()
 
     def act(self, env: gym.Env, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> Any:
         """The action for one raw observation, in ``env``'s action space (clipped / a parameterised tuple)."""
@@ -527,7 +414,7 @@ def load_trained(run_dir: Path) -> TrainedPolicy:
 def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, Any]]:
     """The trained policy (flat or Manager) and its frozen observation normaliser from a checkpoint directory."""
     tensors, meta, cfg = read_run_checkpoint(directory)
-    env = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.trpo.gamma, **cfg.task_kwargs)()
+    env = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **cfg.task_kwargs)()
     obs_dim = int(np.prod(env.observation_space.shape))
     if isinstance(env, MacroEnv):
         check_skill_hashes(meta.get("skills", {}), {s.name: s.content_hash for s in env.skills}, directory)
@@ -672,6 +559,15 @@ def plan_steps(cfg: TrainConfig, done: int = 0) -> StepPlan:
 REJECTED_STEPS_WARNING = 5
 
 
+def update_stat(stats: dict[str, float], name: str, default: float = math.nan) -> float:
+    """The policy update's statistic ``name`` (``kl``, ``accepted``, ...) in an iteration's ``stats``, whichever optimiser
+    logged it (``trpo/kl`` or ``ppo/kl``)."""
+    for algo in ALGOS:
+        if f"{algo}/{name}" in stats:
+            return stats[f"{algo}/{name}"]
+    return default
+
+
 class TrainingWarning(UserWarning):
     """Training runs but does not learn (e.g. every TRPO step rejected)."""
 
@@ -751,7 +647,7 @@ def train(
                     with contextlib.suppress(OSError):
                         _truncate_log(run_dir / "progress.csv", trainer.iteration - 1)
                     raise
-                streak = 0 if stats.get("trpo/accepted", 1.0) else streak + 1
+                streak = 0 if update_stat(stats, "accepted", 1.0) else streak + 1
                 if warn_after_rejected > 0 and streak == warn_after_rejected:
                     warn(rejected_steps_message(streak, cfg, trainer.iteration))
                 yield stats
@@ -808,7 +704,7 @@ def progress_line(label: str, stats: dict[str, float], total: int, elapsed_s: fl
     out += f", return {stats['return_mean']:.1f}"
     if not math.isnan(stats["success_rate"]):
         out += f", success {stats['success_rate']:.2f}"
-    return out + f", kl {stats['trpo/kl']:.4f}, {stats['time/steps_per_s']:.0f} steps/s, {elapsed_s:.0f} s"
+    return out + f", kl {update_stat(stats, 'kl'):.4f}, {stats['time/steps_per_s']:.0f} steps/s, {elapsed_s:.0f} s"
 
 
 def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, console: Any = None,
@@ -857,7 +753,7 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
                 status += f"  success {st['success_rate']:.2f}"
             if cfg.episodes is not None:
                 status += f"  episodes {int(st['episodes_total']):,}/{cfg.episodes:,}"
-            status += f"  kl {st['trpo/kl']:.4f}  {st['time/steps_per_s']:.0f} steps/s"
+            status += f"  kl {update_stat(st, 'kl'):.4f}  {st['time/steps_per_s']:.0f} steps/s"
             done = int(st["env_steps"])
             bar_total = max(bar_total, done)  # a Manager's last iteration passes cfg.steps: the bar says by how much
             assert bar is not None
@@ -869,7 +765,7 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
             summary.env_steps, summary.env_steps_this_session = done, done - start
             if cfg.episodes is not None:  # the summary names the episodes when they are a budget
                 summary.episodes = int(st["episodes_total"])
-            streak = 0 if st.get("trpo/accepted", 1.0) else streak + 1
+            streak = 0 if update_stat(st, "accepted", 1.0) else streak + 1
             summary.rejected += streak > 0
             summary.longest_rejected_streak = max(summary.longest_rejected_streak, streak)
         if summary.iterations == 0:

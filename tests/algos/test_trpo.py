@@ -8,6 +8,7 @@ from torch import nn
 
 from hrlp.algos.kernels import get_flat_params
 from hrlp.algos.trpo import TRPOConfig, TRPOStats, surrogate_objective, trpo_update
+from hrlp.config import AdvantageConfig
 from hrlp.policies.distributions import DiagGaussian
 from hrlp.policies.mlp import CategoricalPolicy, GaussianPolicy, HierarchicalPolicy, ValueNet
 
@@ -153,9 +154,9 @@ def test_rejects_params_without_grad():
 
 
 def test_config_defaults_follow_the_paper():
-    cfg = TRPOConfig()
-    assert (cfg.max_kl, cfg.gamma) == (0.01, 0.99)  # Appendix D
-    assert (cfg.cg_iters, cfg.cg_damping, cfg.gae_lambda, cfg.entropy_coef) == (10, 0.1, 0.97, 0.0)
+    cfg, adv = TRPOConfig(), AdvantageConfig()
+    assert (cfg.max_kl, adv.gamma) == (0.01, 0.99)  # Appendix D
+    assert (cfg.cg_iters, cfg.cg_damping, adv.gae_lambda, cfg.entropy_coef) == (10, 0.1, 0.97, 0.0)
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.max_kl = 0.1  # type: ignore[misc]
 
@@ -172,8 +173,6 @@ def test_config_defaults_follow_the_paper():
         ("line_search_backtracks", 0),
         ("line_search_shrink", 1.0),
         ("line_search_shrink", 0.0),
-        ("gamma", 1.5),
-        ("gae_lambda", -0.1),
         ("entropy_coef", -0.01),
         ("fisher_fraction", 0.0),
         ("fisher_fraction", 1.5),
@@ -182,3 +181,9 @@ def test_config_defaults_follow_the_paper():
 def test_config_validation(field, value):
     with pytest.raises(ValueError, match=field):
         TRPOConfig(**{field: value})
+
+
+@pytest.mark.parametrize(("field", "value"), [("gamma", 1.5), ("gae_lambda", -0.1)])
+def test_advantage_config_validation(field, value):
+    with pytest.raises(ValueError, match=field):
+        AdvantageConfig(**{field: value})

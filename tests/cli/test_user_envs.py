@@ -142,7 +142,7 @@ def test_trpo_settings_are_options_and_resume_refuses_changing_them(user_package
     assert "training episodes in the run" in out.output
     cfg = TrainConfig.from_json(json.loads((user_package / "run" / "config.json").read_text()))
     assert (cfg.episodes, cfg.reward_scale) == (60, 2.0)
-    assert (cfg.trpo.entropy_coef, cfg.trpo.gae_lambda, cfg.trpo.cg_iters, cfg.trpo.cg_damping) == (0.01, 0.9, 5, 0.05)
+    assert (cfg.trpo.entropy_coef, cfg.advantage.gae_lambda, cfg.trpo.cg_iters, cfg.trpo.cg_damping) == (0.01, 0.9, 5, 0.05)
     again = _invoke("train", "user_pkg.envs:UserGuess-v0", "--run-dir", "run", "--resume", "--entropy-coef", "0.2",
                     cwd=user_package)  # fmt: skip
     assert again.exit_code == 2 and "--entropy-coef 0.2 (the run: 0.01)" in again.output, again.output

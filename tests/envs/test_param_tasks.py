@@ -221,9 +221,9 @@ def test_bad_arguments_through_env_factory_are_one_line():
 
 
 def test_short_episode_config_applies_the_settings():
-    cfg = short_episode_config("hrlp/ParamBandit-v0", steps=1000, seed=3, **{"trpo.gamma": 0.9})
+    cfg = short_episode_config("hrlp/ParamBandit-v0", steps=1000, seed=3, **{"advantage.gamma": 0.9})
     assert cfg.batch_steps == SHORT_EPISODE_SETTINGS["batch_steps"] and cfg.seed == 3 and cfg.steps == 1000
-    assert cfg.trpo.max_kl == SHORT_EPISODE_SETTINGS["trpo.max_kl"] and cfg.trpo.gamma == 0.9
+    assert cfg.trpo.max_kl == SHORT_EPISODE_SETTINGS["trpo.max_kl"] and cfg.advantage.gamma == 0.9
     with pytest.raises(ValueError, match="unknown settings"):
         short_episode_config("hrlp/ParamBandit-v0", steps=1000, **{"policy.x": 1})
 

@@ -26,65 +26,10 @@ from hrlp.algos.kernels import (
     max_step_length,
     standardize,
 )
+from hrlp.config import TRPOConfig  # torch-free (for `hrlp --help`); importable from here as before
 from hrlp.policies.distributions import Distribution
 
 __all__ = ["TRPOConfig", "TRPOStats", "surrogate_objective", "trpo_update"]
-
-
-@dataclass(frozen=True)
-class TRPOConfig:
-    """TRPO settings. Defaults: the paper's Appendix D where it states a value, modular_rl's TRPO runs otherwise."""
-
-    max_kl: float = 0.01
-    """Trust-region radius delta: bound on the mean KL(old || new) over the batch's states (Appendix D: 0.01)."""
-    cg_iters: int = 10
-    """Conjugate-gradient iterations for the natural-gradient direction F^-1 g (modular_rl: 10)."""
-    cg_damping: float = 0.1
-    """Multiple of the identity added to the Fisher matrix in CG; keeps F + lambda I well conditioned for small
-    batches. modular_rl's code default is 1e-3, its published TRPO runs (experiments/2-trpo-scripts.txt) use 0.1."""
-    cg_residual_tol: float = 1e-10
-    """CG stops early once the squared residual norm falls below this."""
-    line_search_backtracks: int = 10
-    """Number of step sizes tried by the backtracking line search (modular_rl: 10)."""
-    line_search_shrink: float = 0.5
-    """Factor by which the step shrinks after each rejected candidate (modular_rl: 0.5)."""
-    gamma: float = 0.99
-    """Discount per (decision) step for returns and GAE (Appendix D: 0.99). For the Manager the effective per-step
-    discount is gamma ** tau for a macro-action of tau low-level steps, passed to GAE as ``discount``."""
-    gae_lambda: float = 0.97
-    """GAE lambda. The paper does not state one; 0.97 is what modular_rl's published TRPO runs use
-    (``--lam=0.97``; the option's code default is 1.0, i.e. plain Monte-Carlo advantages)."""
-    entropy_coef: float = 0.0
-    """Weight of the mean-entropy bonus added to the surrogate (TRPO as published: 0)."""
-    normalize_advantages: bool = True
-    """Standardise advantages to zero mean and unit variance over the batch before the update (modular_rl does)."""
-    fisher_fraction: float = 1.0
-    """Share of the batch's states on which the Fisher-vector products of conjugate gradient are estimated
-    (every ``round(1 / fraction)``-th state). Schulman et al. (2015, Section 6) use 10%: the products dominate
-    the update's cost while the gradient, the step length's KL and the line search still use the whole batch.
-    1.0: every state (exact, modular_rl's default)."""
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.max_kl) and self.max_kl > 0):
-            raise ValueError(f"max_kl must be a positive finite number, got {self.max_kl}")
-        if self.cg_iters < 1:
-            raise ValueError(f"cg_iters must be >= 1, got {self.cg_iters}")
-        if not self.cg_damping >= 0:
-            raise ValueError(f"cg_damping must be >= 0, got {self.cg_damping}")
-        if not self.cg_residual_tol >= 0:
-            raise ValueError(f"cg_residual_tol must be >= 0, got {self.cg_residual_tol}")
-        if self.line_search_backtracks < 1:
-            raise ValueError(f"line_search_backtracks must be >= 1, got {self.line_search_backtracks}")
-        if not 0 < self.line_search_shrink < 1:
-            raise ValueError(f"line_search_shrink must be in (0, 1), got {self.line_search_shrink}")
-        if not 0 <= self.gamma <= 1:
-            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
-        if not 0 <= self.gae_lambda <= 1:
-            raise ValueError(f"gae_lambda must be in [0, 1], got {self.gae_lambda}")
-        if not self.entropy_coef >= 0:
-            raise ValueError(f"entropy_coef must be >= 0, got {self.entropy_coef}")
-        if not 0 < self.fisher_fraction <= 1:
-            raise ValueError(f"fisher_fraction must be in (0, 1], got {self.fisher_fraction}")
 
 
 @dataclass(frozen=True)

@@ -8,42 +8,15 @@ deterministic given the batch. The value network is its own module, never part o
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
 
 from hrlp.algos.kernels import explained_variance
+from hrlp.config import ValueFitConfig  # torch-free (for `hrlp --help`); importable from here as before
 
 __all__ = ["ValueFitConfig", "ValueFitStats", "fit_value"]
-
-
-@dataclass(frozen=True)
-class ValueFitConfig:
-    """Settings of the L-BFGS value fit."""
-
-    max_iter: int = 25
-    """L-BFGS iterations per fit (modular_rl: 25)."""
-    l2_coef: float = 1e-3
-    """Weight of the L2 penalty ``sum_w ||w||^2`` over all value-net parameters (modular_rl: 1e-3)."""
-    history_size: int = 10
-    """Number of curvature pairs L-BFGS keeps (scipy's L-BFGS-B default, as in modular_rl)."""
-    fraction: float = 1.0
-    """Share of the batch's time steps the trainer fits on (every ``round(1 / fraction)``-th step of every
-    environment). The fit is the costliest part of a flat iteration after sampling, and a baseline needs fewer
-    samples than the policy step: consecutive states of one episode carry nearly the same targets. 1.0: every
-    state (modular_rl)."""
-
-    def __post_init__(self) -> None:
-        if self.max_iter < 1:
-            raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
-        if not (math.isfinite(self.l2_coef) and self.l2_coef >= 0):
-            raise ValueError(f"l2_coef must be a finite number >= 0, got {self.l2_coef}")
-        if self.history_size < 1:
-            raise ValueError(f"history_size must be >= 1, got {self.history_size}")
-        if not 0 < self.fraction <= 1:
-            raise ValueError(f"value fraction must be in (0, 1], got {self.fraction}")
 
 
 @dataclass(frozen=True)

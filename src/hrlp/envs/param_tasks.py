@@ -332,25 +332,22 @@ def short_episode_config(task: str, steps: int, seed: int = 0, **overrides: Any)
     names) applied; ``steps`` is the budget in decisions."""
     import dataclasses
 
-    from hrlp.algos.trpo import TRPOConfig
-    from hrlp.algos.value import ValueFitConfig
-    from hrlp.train import TrainConfig
+    from hrlp.config import TrainConfig
 
     settings = {**SHORT_EPISODE_SETTINGS, **overrides}
+    nested = {f.name: f.default_factory() for f in dataclasses.fields(TrainConfig) if f.name in _NESTED}  # type: ignore[misc]
     top = {k: v for k, v in settings.items() if "." not in k}
-    trpo = {k.removeprefix("trpo."): v for k, v in settings.items() if k.startswith("trpo.")}
-    value = {k.removeprefix("value."): v for k, v in settings.items() if k.startswith("value.")}
-    unknown = [k for k in settings if "." in k and not k.startswith(("trpo.", "value."))]
+    unknown = [k for k in settings if "." in k and k.split(".")[0] not in nested]
     if unknown:
-        raise ValueError(f"unknown settings {unknown}: use TrainConfig fields, trpo.<field> or value.<field>")
-    return TrainConfig(
-        task=task,
-        steps=steps,
-        seed=seed,
-        trpo=dataclasses.replace(TRPOConfig(), **trpo),
-        value=dataclasses.replace(ValueFitConfig(), **value),
-        **top,
-    )
+        raise ValueError(f"unknown settings {unknown}: use TrainConfig fields or {', '.join(f'{n}.<field>' for n in nested)}")
+    for name, default in nested.items():
+        given = {k.removeprefix(f"{name}."): v for k, v in settings.items() if k.startswith(f"{name}.")}
+        top[name] = dataclasses.replace(default, **given)
+    return TrainConfig(task=task, steps=steps, seed=seed, **top)
+
+
+_NESTED = ("advantage", "trpo", "ppo", "value")
+"""TrainConfig's nested settings that :func:`short_episode_config` takes as ``<name>.<field>``."""
 
 
 MAX_DECISIONS = {"ParamMatch": 50}

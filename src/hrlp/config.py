@@ -1,0 +1,320 @@
+"""The settings of a training run: :class:`TrainConfig`, with the advantage estimate's (:class:`AdvantageConfig`), the
+policy optimiser's (:class:`TRPOConfig`, :class:`PPOConfig`) and the value fit's (:class:`ValueFitConfig`), and their
+checks.
+
+This module imports neither torch nor gymnasium, so ``hrlp --help`` can build the options of ``hrlp train`` and
+``hrlp train-manager`` from these dataclasses (:func:`field_docs` reads each field's docstring, the string literal
+right after it, which is also the option's help). The classes are also importable from their old places:
+``hrlp.train.TrainConfig``, ``hrlp.algos.trpo.TRPOConfig``, ``hrlp.algos.value.ValueFitConfig``.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import functools
+import inspect
+import itertools
+import math
+import sys
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from hrlp import bounds
+
+if TYPE_CHECKING:
+    from hrlp.skills.macro_env import MacroSpec
+
+__all__ = ["ALGOS", "AdvantageConfig", "PPOConfig", "TRPOConfig", "TrainConfig", "ValueFitConfig", "field_docs"]
+
+
+@dataclass(frozen=True)
+class TRPOConfig:
+    """TRPO settings. Defaults: the paper's Appendix D where it states a value, modular_rl's TRPO runs otherwise."""
+
+    max_kl: float = 0.01
+    """Trust-region radius delta: bound on the mean KL(old || new) over the batch's states (Appendix D: 0.01)."""
+    cg_iters: int = 10
+    """Conjugate-gradient iterations for the natural-gradient direction F^-1 g (modular_rl: 10)."""
+    cg_damping: float = 0.1
+    """Multiple of the identity added to the Fisher matrix in CG; keeps F + lambda I well conditioned for small
+    batches. modular_rl's code default is 1e-3, its published TRPO runs (experiments/2-trpo-scripts.txt) use 0.1."""
+    cg_residual_tol: float = 1e-10
+    """CG stops early once the squared residual norm falls below this."""
+    line_search_backtracks: int = 10
+    """Number of step sizes tried by the backtracking line search (modular_rl: 10)."""
+    line_search_shrink: float = 0.5
+    """Factor by which the step shrinks after each rejected candidate (modular_rl: 0.5)."""
+    entropy_coef: float = 0.0
+    """Weight of the mean-entropy bonus added to the surrogate (TRPO as published: 0)."""
+    normalize_advantages: bool = True
+    """Standardise advantages to zero mean and unit variance over the batch before the update (modular_rl does)."""
+    fisher_fraction: float = 1.0
+    """Share of the batch's states on which the Fisher-vector products of conjugate gradient are estimated
+    (every ``round(1 / fraction)``-th state). Schulman et al. (2015, Section 6) use 10%: the products dominate
+    the update's cost while the gradient, the step length's KL and the line search still use the whole batch.
+    1.0: every state (exact, modular_rl's default)."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.max_kl) and self.max_kl > 0):
+            raise ValueError(f"max_kl must be a positive finite number, got {self.max_kl}")
+        if self.cg_iters < 1:
+            raise ValueError(f"cg_iters must be >= 1, got {self.cg_iters}")
+        if not self.cg_damping >= 0:
+            raise ValueError(f"cg_damping must be >= 0, got {self.cg_damping}")
+        if not self.cg_residual_tol >= 0:
+            raise ValueError(f"cg_residual_tol must be >= 0, got {self.cg_residual_tol}")
+        if self.line_search_backtracks < 1:
+            raise ValueError(f"line_search_backtracks must be >= 1, got {self.line_search_backtracks}")
+        if not 0 < self.line_search_shrink < 1:
+            raise ValueError(f"line_search_shrink must be in (0, 1), got {self.line_search_shrink}")
+        if not self.entropy_coef >= 0:
+            raise ValueError(f"entropy_coef must be >= 0, got {self.entropy_coef}")
+        if not 0 < self.fisher_fraction <= 1:
+            raise ValueError(f"fisher_fraction must be in (0, 1], got {self.fisher_fraction}")
+
+
+@dataclass(frozen=True)
+class AdvantageConfig:
+    """How returns and advantages are estimated, whatever the optimiser (TRPO or PPO)."""
+
+    gamma: float = 0.99
+    """Discount per (decision) step for returns and GAE (Appendix D: 0.99). For the Manager the effective per-step
+    discount is gamma ** tau for a macro-action of tau low-level steps, passed to GAE as ``discount``."""
+    gae_lambda: float = 0.97
+    """GAE lambda (1: plain Monte-Carlo advantages). The paper does not state one; 0.97 is what modular_rl's published
+    TRPO runs use (its ``--lam=0.97``; its code default is 1.0)."""
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.gamma <= 1:
+            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
+        if not 0 <= self.gae_lambda <= 1:
+            raise ValueError(f"gae_lambda must be in [0, 1], got {self.gae_lambda}")
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO's settings (``algo="ppo"``): CleanRL's and Stable-Baselines3's defaults for continuous control, with an early
+    stop on the exact mean KL (Lemma 1's for a Manager)."""
+
+    clip: float = 0.2
+    """Clipping range epsilon of the probability ratio."""
+    epochs: int = 10
+    """Passes over the batch per update."""
+    minibatches: int = 32
+    """Minibatches per epoch (the batch is shuffled and split into this many)."""
+    lr: float = 3e-4
+    """Adam's learning rate."""
+    max_grad_norm: float = 0.5
+    """Gradients are clipped to this Euclidean norm (0: no clipping)."""
+    target_kl: float = 0.02
+    """Stop an update after the epoch whose exact mean KL(old || new) over the batch exceeds this (0: never stop)."""
+    entropy_coef: float = 0.0
+    """Weight of the mean entropy bonus in PPO's objective."""
+    normalize_advantages: bool = True
+    """Standardise the advantages over the whole batch before PPO's update."""
+
+    def __post_init__(self) -> None:
+        for name in ("clip", "lr"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        for name in ("max_grad_norm", "target_kl", "entropy_coef"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a number >= 0, got {v!r}")
+        for name in ("epochs", "minibatches"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+
+
+#: The policy optimisers a run may use (``TrainConfig.algo``).
+ALGOS = ("trpo", "ppo")
+
+
+@dataclass(frozen=True)
+class ValueFitConfig:
+    """Settings of the L-BFGS value fit."""
+
+    max_iter: int = 25
+    """L-BFGS iterations per fit (modular_rl: 25)."""
+    l2_coef: float = 1e-3
+    """Weight of the L2 penalty ``sum_w ||w||^2`` over all value-net parameters (modular_rl: 1e-3)."""
+    history_size: int = 10
+    """Number of curvature pairs L-BFGS keeps (scipy's L-BFGS-B default, as in modular_rl)."""
+    fraction: float = 1.0
+    """Share of the batch's time steps the trainer fits on (every ``round(1 / fraction)``-th step of every
+    environment). The fit is the costliest part of a flat iteration after sampling, and a baseline needs fewer
+    samples than the policy step: consecutive states of one episode carry nearly the same targets. 1.0: every
+    state (modular_rl)."""
+
+    def __post_init__(self) -> None:
+        if self.max_iter < 1:
+            raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
+        if not (math.isfinite(self.l2_coef) and self.l2_coef >= 0):
+            raise ValueError(f"l2_coef must be a finite number >= 0, got {self.l2_coef}")
+        if self.history_size < 1:
+            raise ValueError(f"history_size must be >= 1, got {self.history_size}")
+        if not 0 < self.fraction <= 1:
+            raise ValueError(f"value fraction must be in (0, 1], got {self.fraction}")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Settings of a training run, flat or Manager (defaults from the paper's Appendix D: TRPO)."""
+
+    task: str
+    """An hrlp task name (``hrlp tasks``) or a Gymnasium id, e.g. Pusher-v5."""
+    steps: int = 1_000_000
+    """Low-level environment steps in total (a Manager's macro-action of tau steps counts tau)."""
+    batch_steps: int = 50_000
+    """Decisions per TRPO iteration (the paper: 50,000 for flat runs, 5,000 for Managers)."""
+    num_envs: int = 16
+    """Environments stepped together with batched inference."""
+    workers: int = 1
+    """Processes that sample at the same time, each stepping its share of the environments (1: in this process)."""
+    seed: int = 0
+    """Seed of the environments, the network initialisation and the action noise."""
+    episode_steps: int | None = None
+    """Episode length: an hrlp task's (None: its default, 300) or a Gymnasium id's time limit (None: its own)."""
+    hidden: tuple[int, ...] = (64, 64)
+    """Hidden layer widths of the policy and value networks."""
+    init_log_std: float = 0.0
+    """Initial log standard deviation of the policy's Gaussian action noise (0: std 1 on [-1, 1] torques)."""
+    algo: str = "trpo"
+    """The policy optimiser: ``trpo`` (the paper's, settings in ``trpo``) or ``ppo`` (clipped surrogate, ``ppo``)."""
+    advantage: AdvantageConfig = field(default_factory=AdvantageConfig)
+    """Return and advantage settings (gamma 0.99, GAE lambda 0.97)."""
+    trpo: TRPOConfig = field(default_factory=TRPOConfig)
+    """TRPO settings (max KL 0.01, ...)."""
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    """PPO settings, used with ``algo="ppo"``."""
+    value: ValueFitConfig = field(default_factory=ValueFitConfig)
+    """Value-baseline fit settings."""
+    macro: MacroSpec | None = None
+    """For a Manager: its skills, their duration k and the micro-action; None for a flat policy."""
+    task_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Arguments of the task, e.g. ``{"c1": -10.0}`` (Gripper reward constants) or ``{"curriculum_alpha": 1e-4}``."""
+    init_from: str | None = None
+    """For a flat run: a skill (a name in the libraries a Manager searches, or a skill directory) whose policy and
+    observation statistics the run starts from instead of a fresh network (DAgger retraining, ``hrlp dagger``)."""
+    episodes: int | None = None
+    """Training episodes in total (None: no episode budget). The run stops after the iteration in which the step budget
+    or this one is reached, whichever comes first; an episode counts when it ends (terminated or truncated)."""
+    reward_scale: float = 1.0
+    """Factor on every reward before advantages and value targets are computed: training only. Logged returns,
+    success and evaluation (``hrlp eval``) stay in the task's own units."""
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "batch_steps", "num_envs", "workers"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if self.workers > self.num_envs:
+            raise ValueError(f"workers ({self.workers}) must be at most num_envs ({self.num_envs})")
+        if self.batch_steps < self.num_envs:
+            raise ValueError(f"batch_steps ({self.batch_steps}) must be at least num_envs ({self.num_envs})")
+        if self.episode_steps is not None and (not isinstance(self.episode_steps, int) or self.episode_steps <= 0):
+            raise ValueError(f"episode_steps must be a positive integer, got {self.episode_steps!r}")
+        if not self.hidden or any(h <= 0 for h in self.hidden):
+            raise ValueError(f"hidden must be positive layer widths, got {self.hidden!r}")
+        if not (isinstance(self.init_log_std, int | float) and math.isfinite(self.init_log_std)):
+            raise ValueError(f"init_log_std must be a finite number, got {self.init_log_std!r}")
+        if self.episodes is not None and (isinstance(self.episodes, bool) or not isinstance(self.episodes, int)
+                                          or self.episodes <= 0):  # fmt: skip
+            raise ValueError(f"episodes must be a positive integer (or None: no episode budget), got {self.episodes!r}")
+        if not (isinstance(self.reward_scale, int | float) and math.isfinite(self.reward_scale) and self.reward_scale > 0):
+            raise ValueError(f"reward_scale must be a positive finite number, got {self.reward_scale!r}")
+        if self.algo not in ALGOS:
+            raise ValueError(f"algo must be one of {', '.join(ALGOS)}, got {self.algo!r}")
+        if self.algo == "ppo" and self.steps_per_env * self.num_envs < self.ppo.minibatches:
+            raise ValueError(f"PPO's {self.ppo.minibatches} minibatches need a batch of at least as many decisions, "
+                             f"got {self.steps_per_env * self.num_envs}")  # fmt: skip
+        if not isinstance(self.task_kwargs, dict) or not all(isinstance(k, str) for k in self.task_kwargs):
+            raise ValueError(f"task_kwargs must map argument names to values, got {self.task_kwargs!r}")
+        self._check_bounds()
+
+    def _check_bounds(self) -> None:
+        """What a config may ask for (:mod:`hrlp.bounds`), and settings that would be silently meaningless."""
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed <= bounds.MAX_SEED:
+            raise ValueError(f"seed must be an integer in [0, {bounds.MAX_SEED}] (seeds are 32-bit), got {self.seed!r}")
+        for name, high, why in (("steps", bounds.MAX_STEPS, bounds.WHY_STEPS),
+                                ("batch_steps", bounds.MAX_BATCH_STEPS, bounds.WHY_BATCH_STEPS),
+                                ("num_envs", bounds.MAX_NUM_ENVS, bounds.WHY_NUM_ENVS)):  # fmt: skip
+            if (problem := bounds.count_problem(getattr(self, name), 1, high, why)) is not None:
+                raise ValueError(f"{name} {problem}")
+        if "episode_steps" in self.task_kwargs:
+            raise ValueError("give the episode length as episode_steps (--episode-steps), not as a task argument")
+        batch = self.steps_per_env * self.num_envs
+        problems = [
+            bounds.fraction_problem("fisher_fraction", self.trpo.fisher_fraction, batch, "decisions"),
+            bounds.fraction_problem("value fraction", self.value.fraction, self.steps_per_env, "time steps"),
+        ]
+        if self.macro is not None:
+            from hrlp.envs.check import default_episode_steps
+
+            episode = self.episode_steps or default_episode_steps()
+            micro = None if self.macro.micro is None else self.macro.micro.duration
+            problems += [
+                bounds.duration_problem("k", self.macro.k, episode),
+                bounds.duration_problem("the micro-action's duration", micro, episode),
+            ]
+        if problem := next((p for p in problems if p is not None), None):
+            raise ValueError(problem)
+
+    @property
+    def steps_per_env(self) -> int:
+        """Decisions each environment takes per iteration."""
+        return math.ceil(self.batch_steps / self.num_envs)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-serialisable dict of every setting."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> TrainConfig:
+        """Inverse of :meth:`to_json`."""
+        d = dict(d)
+        d["hidden"] = tuple(d["hidden"])
+        trpo = dict(d["trpo"])
+        # Configs saved before the advantage settings had their own record kept them in TRPO's.
+        moved = {k: trpo.pop(k) for k in ("gamma", "gae_lambda") if k in trpo}
+        d["advantage"] = AdvantageConfig(**{**moved, **d.get("advantage", {})})
+        d["trpo"] = TRPOConfig(**trpo)
+        d["ppo"] = PPOConfig(**d.get("ppo", {}))
+        d["value"] = ValueFitConfig(**d["value"])
+        if d.get("macro"):
+            from hrlp.skills.macro_env import MacroSpec  # imports gymnasium and the skills: only for a Manager's config
+
+            d["macro"] = MacroSpec.from_json(d["macro"])
+        else:
+            d["macro"] = None
+        return cls(**d)
+
+
+@functools.cache
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring of each field of the dataclass ``cls`` that has one (the string literal written right after the
+    field), by field name, with its whitespace collapsed to single spaces. Read from the source of ``cls``'s module
+    (``ast``), so nothing is copied by hand; empty when the source is not available."""
+    tree = _module_tree(cls.__module__)
+    node = next((n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == cls.__name__), None)
+    names = {f.name for f in dataclasses.fields(cls)}
+    body = node.body if node is not None else []
+    docs: dict[str, str] = {}
+    for stmt, after in itertools.pairwise(body):
+        if (isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name) and stmt.target.id in names
+                and isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant)
+                and isinstance(after.value.value, str)):  # fmt: skip
+            docs[stmt.target.id] = " ".join(after.value.value.split())
+    return docs
+
+
+@functools.cache
+def _module_tree(name: str) -> ast.Module:
+    """The parsed source of module ``name`` (parsed once); an empty module when its source is not available."""
+    try:
+        return ast.parse(inspect.getsource(sys.modules[name]))
+    except (OSError, TypeError):  # no source shipped (e.g. only bytecode)
+        return ast.Module(body=[], type_ignores=[])

@@ -1,0 +1,253 @@
+"""The vector-environment seam: one typed step record and one protocol that every batch of environments implements.
+
+A :class:`VectorEnv` steps ``N`` environments together: ``reset(seed) -> obs [N, obs_dim]`` and
+``step(actions [N, act_dim]) -> VectorStep``. The sampler (a later change) will see only this protocol, whether the
+``N`` environments are ordinary Gymnasium environments stepped one by one (:class:`SerialVectorEnv`, the reference
+implementation here), hrlp's batched MuJoCo backend (:class:`hrlp.envs.batched.BatchedArmEnv`), a Manager's
+macro-action environment or, later, a GPU backend.
+
+Autoreset convention (Gymnasium's "same-step" mode): when a step ends an episode (terminated or truncated), the
+environment is reset within that step. :attr:`VectorStep.next_obs` holds the observation the step produced (an
+ended episode's real last observation, the one to bootstrap from after a truncation) and :attr:`VectorStep.obs` the
+observation the next action acts on (the new episode's first where one ended, else the same as ``next_obs``). Every
+other field (reward, success, ``infos``) belongs to the step taken, so to the ended episode where one ended. There is
+no step whose action is ignored (Gymnasium's default "next-step" mode has one per episode), so every step is a
+transition of the MDP and a batch of ``T`` steps holds ``T * N`` transitions.
+
+Seeds: ``reset(seed)`` seeds environment ``i`` with ``seed + i`` (the sampler's convention); later episodes continue
+each environment's own random stream.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import gymnasium as gym
+import numpy as np
+
+
+@dataclass(frozen=True)
+class VectorStep:
+    """One step of ``N`` environments (see the module docstring for the autoreset convention).
+
+    For a flat step ``tau = 1`` and ``discount = gamma``; a macro-action of ``tau`` low-level steps has
+    ``discount = gamma ** tau`` (the discount to apply to the value of ``next_obs``).
+    """
+
+    obs: np.ndarray  # [N, obs_dim] float64: what the next action acts on (a new episode's first where one ended)
+    next_obs: np.ndarray  # [N, obs_dim] float64: what this step produced (an ended episode's real last observation)
+    rewards: np.ndarray  # [N] float64
+    discount: np.ndarray  # [N] float64: gamma ** tau
+    tau: np.ndarray  # [N] int64: low-level steps taken (1 for a flat step)
+    terminated: np.ndarray  # [N] bool: the MDP ended (no bootstrap)
+    truncated: np.ndarray  # [N] bool: cut by a time limit or a physics fault (bootstrap from next_obs); never with terminated
+    success: np.ndarray  # [N] bool: whether the episode has succeeded at any step up to and including this one
+    infos: Mapping[str, np.ndarray]  # each [N]: reward terms ``reward_<term>``, ``physics_unstable``, tracked sums/maxima
+    physics_seconds: float  # seconds inside MuJoCo's step during this step, all N environments together (NaN: unknown)
+
+    @property
+    def done(self) -> np.ndarray:
+        """[N] bool: the episode ended at this step (terminated or truncated); ``obs`` then starts a new one."""
+        return self.terminated | self.truncated
+
+
+@runtime_checkable
+class VectorEnv(Protocol):
+    """``N`` environments stepped together, auto-resetting in the same step (see the module docstring)."""
+
+    @property
+    def num_envs(self) -> int:
+        """N."""
+        ...
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of one observation."""
+        ...
+
+    @property
+    def act_dim(self) -> int:
+        """Length of one action."""
+        ...
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Start a new episode in every environment (environment ``i`` seeded with ``seed + i``); returns
+        ``obs [N, obs_dim]``."""
+        ...
+
+    def step(self, actions: np.ndarray) -> VectorStep:
+        """Apply ``actions [N, act_dim]``, one row per environment; ends and restarts episodes as they finish."""
+        ...
+
+    def get_state(self) -> dict[str, Any]:
+        """Everything needed to continue exactly (JSON-serialisable)."""
+        ...
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`get_state`."""
+        ...
+
+    def close(self) -> None:
+        """Release resources (threads, renderers)."""
+        ...
+
+
+def check_actions(actions: np.ndarray, n: int, act_dim: int, who: str) -> np.ndarray:
+    """``actions`` as a float64 array ``[n, act_dim]``; a one-line ValueError naming ``who`` for a wrong shape or a
+    NaN or inf (with the first environment that has one)."""
+    a = np.asarray(actions, dtype=np.float64)
+    if a.shape != (n, act_dim):
+        raise ValueError(f"{who}: actions must have shape ({n}, {act_dim}) (one row per environment), got {a.shape}")
+    finite = np.isfinite(a)
+    if not finite.all():
+        bad = int(np.flatnonzero(~finite.all(axis=1))[0])
+        raise ValueError(f"{who}: actions contain NaN or inf (environment {bad}: {a[bad].tolist()})")
+    return a
+
+
+def check_num_envs(n: object, who: str) -> int:
+    """``n`` as an int if it is a positive integer; else a one-line ValueError naming ``who``."""
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise ValueError(f"{who}: the number of environments n must be a positive integer, got {n!r}")
+    return int(n)
+
+
+def check_gamma(gamma: object, who: str) -> float:
+    """``gamma`` as a float if it is a number in (0, 1]; else a one-line ValueError naming ``who``."""
+    if isinstance(gamma, bool) or not isinstance(gamma, int | float) or not 0 < gamma <= 1:
+        raise ValueError(f"{who}: gamma must be a number in (0, 1], got {gamma!r}")
+    return float(gamma)
+
+
+def info_arrays(infos: Sequence[Mapping[str, Any]], skip: frozenset[str] = frozenset({"success"})) -> dict[str, np.ndarray]:
+    """Per-environment info dicts as arrays ``[N]``, one per key that any of them reports as a scalar.
+
+    A key whose values are all bools gives a bool array (False where missing); any other scalar key a float64
+    array (NaN where missing). Non-scalar values (e.g. ``physics_warnings``, a dict) and the keys in ``skip`` are
+    left out. ``physics_unstable`` is always present (False where missing)."""
+    n = len(infos)
+    keys: dict[str, bool] = {"physics_unstable": True}  # key -> all values bool so far
+    for info in infos:
+        for k, v in info.items():
+            if k in skip or not isinstance(v, bool | int | float | np.bool_ | np.number):
+                continue
+            keys[k] = keys.get(k, True) and isinstance(v, bool | np.bool_)
+    out: dict[str, np.ndarray] = {}
+    for k, is_bool in keys.items():
+        arr = np.zeros(n, dtype=bool) if is_bool else np.full(n, np.nan)
+        for i, info in enumerate(infos):
+            if k in info:
+                arr[i] = info[k]
+        out[k] = arr
+    return out
+
+
+class SerialVectorEnv:
+    """The reference :class:`VectorEnv`: ``N`` ordinary Gymnasium environments stepped one after another.
+
+    Args:
+        envs: the environments (hrlp's :class:`~hrlp.envs.arm_env.ArmEnv` or any Gymnasium environment with a flat
+            ``Box`` observation and action space); they are reset and stepped by this object from now on.
+        gamma: the discount per step (``discount = gamma``, ``tau = 1``).
+
+    Each step calls ``env.step`` on every environment and ``env.reset()`` (no seed: the environment's own stream
+    continues) on those whose episode ended. ``success`` is ``info['success']`` (False where absent), ``infos``
+    holds the scalar info values as arrays (:func:`info_arrays`), ``physics_seconds`` the sum of the environments'
+    own ``physics_seconds`` counters (ArmEnv: CPU seconds inside ``mj_step``; NaN if an environment has none).
+    """
+
+    def __init__(self, envs: Sequence[gym.Env], gamma: float = 0.99) -> None:
+        self.envs = list(envs)
+        check_num_envs(len(self.envs), "SerialVectorEnv")
+        self.gamma = check_gamma(gamma, "SerialVectorEnv")
+        first = self.envs[0]
+        self._obs_dim = int(np.prod(first.observation_space.shape))
+        self._act_dim = int(np.prod(first.action_space.shape))
+        self._obs: np.ndarray | None = None
+
+    @property
+    def num_envs(self) -> int:
+        """N."""
+        return len(self.envs)
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of one observation."""
+        return self._obs_dim
+
+    @property
+    def act_dim(self) -> int:
+        """Length of one action."""
+        return self._act_dim
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Reset every environment (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
+        obs = [env.reset(seed=None if seed is None else seed + i)[0] for i, env in enumerate(self.envs)]
+        self._obs = np.stack(obs).astype(np.float64).reshape(self.num_envs, self._obs_dim)
+        return self._obs.copy()
+
+    def step(self, actions: np.ndarray) -> VectorStep:
+        """Step every environment with its row of ``actions [N, act_dim]``; reset those whose episode ended."""
+        if self._obs is None:
+            raise RuntimeError("SerialVectorEnv: call reset() before step()")
+        n = self.num_envs
+        a = check_actions(actions, n, self._act_dim, "SerialVectorEnv")
+        next_obs = np.empty((n, self._obs_dim))
+        rewards = np.empty(n)
+        terminated, truncated, success = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+        infos: list[Mapping[str, Any]] = []
+        physics0 = self._physics_seconds()
+        for i, env in enumerate(self.envs):
+            o, r, term, trunc, info = env.step(a[i])
+            next_obs[i], rewards[i] = np.ravel(o), r
+            terminated[i], truncated[i] = term, trunc and not term
+            success[i] = bool(info.get("success", False))
+            infos.append(info)
+        physics = self._physics_seconds() - physics0
+        obs = next_obs.copy()
+        for i in np.flatnonzero(terminated | truncated):
+            obs[i] = np.ravel(self.envs[i].reset()[0])
+        self._obs = obs
+        return VectorStep(
+            obs=obs.copy(),
+            next_obs=next_obs,
+            rewards=rewards,
+            discount=np.full(n, self.gamma),
+            tau=np.ones(n, dtype=np.int64),
+            terminated=terminated,
+            truncated=truncated,
+            success=success,
+            infos=info_arrays(infos),
+            physics_seconds=physics,
+        )
+
+    def get_state(self) -> dict[str, Any]:
+        """Each environment's ``get_state()`` (they must have one, as ArmEnv does) and the current observations."""
+        if self._obs is None:
+            raise RuntimeError("SerialVectorEnv: call reset() before get_state()")
+        return {"envs": [env.unwrapped.get_state() for env in self.envs], "obs": self._obs.tolist()}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`get_state` (also a :class:`~hrlp.envs.batched.BatchedArmEnv`'s, whose format is the same)."""
+        if len(state["envs"]) != self.num_envs:
+            raise ValueError(
+                f"SerialVectorEnv: the saved state has {len(state['envs'])} environments, this one {self.num_envs}"
+            )
+        for env, s in zip(self.envs, state["envs"], strict=True):
+            env.unwrapped.set_state(s)
+        self._obs = np.asarray(state["obs"], dtype=np.float64).reshape(self.num_envs, self._obs_dim)
+
+    def close(self) -> None:
+        """Close every environment."""
+        for env in self.envs:
+            env.close()
+
+    def _physics_seconds(self) -> float:
+        # Gymnasium environments other than hrlp's do not count their physics time: the sum is then NaN.
+        return sum(float(getattr(env.unwrapped, "physics_seconds", math.nan)) for env in self.envs)
+
+
+__all__ = ["SerialVectorEnv", "VectorEnv", "VectorStep", "check_actions", "check_gamma", "check_num_envs", "info_arrays"]
