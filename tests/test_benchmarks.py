@@ -19,6 +19,7 @@ CASES = {  # script: (arguments, a line its output must contain)
     ),
     "trpo_returns.py": ("--libs hrlp --steps 1000 --batch-steps 500 --seeds 1 --episodes 1", "hrlp"),
     "reliability.py": ("--only physics --blow-ups 2", "forced physics blow-ups: 24 (3 kinds x 2 steps x 4 tasks"),
+    "scripted_grasp.py": ("--episodes 2 --steps 30 --no-bank", "episodes; capsule pushed > 3 cm in"),
     "batched_step.py": ("--world-steps 40 --episode-steps 30 --repeats 1 --n 4", "fastest:"),
     "ppo_vs_trpo.py": (
         "--seeds 1 --flat-steps 64 --flat-batch 64 --manager-steps 32 --manager-batch 32 --episodes 1 --out cmp",

@@ -277,6 +277,9 @@ class TrainConfig:
         """Inverse of :meth:`to_json`."""
         d = dict(d)
         d["hidden"] = tuple(d["hidden"])
+        for name in ("trpo", "value", "advantage", "ppo"):
+            if name in d and not isinstance(d[name], dict):
+                raise TypeError(f"{name} must be a mapping of settings, got {type(d[name]).__name__}")
         trpo = dict(d["trpo"])
         # Configs saved before the advantage settings had their own record kept them in TRPO's.
         moved = {k: trpo.pop(k) for k in ("gamma", "gae_lambda") if k in trpo}

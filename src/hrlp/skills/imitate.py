@@ -1,0 +1,168 @@
+"""Imitating the scripted grasp: behaviour cloning with DAgger relabelling into an ordinary flat Gripper run.
+
+Round 0 rolls the expert (:class:`~hrlp.skills.scripted.ScriptedGrasp`) out from the task's starts and records every
+state's observation with the expert's action. Each DAgger round (Ross et al., 2011) then rolls the current student out
+and labels the states *it* visits with the expert's actions, so the student learns to recover from its own mistakes;
+the student is refitted on everything gathered so far. The student is the network a flat TRPO run trains
+(:func:`hrlp.policies.mlp.policy_for_space`, with the run's hidden layers and initial log std) behind the run's
+observation normaliser, fitted by mean squared error of its mean action on the expert's (clipped) torques.
+
+The result is written as iteration 0 of a training run of ``train_config`` (a checkpoint, ``config.json`` and
+``imitation.json``): ``hrlp eval RUN`` evaluates it, and ``hrlp train TASK --run-dir RUN --resume --steps N``
+fine-tunes it with TRPO from there.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from hrlp.atomic import writing
+from hrlp.config import TrainConfig
+from hrlp.envs.arm_env import ArmEnv
+from hrlp.skills.scripted import ScriptedGrasp
+
+__all__ = ["ImitationConfig", "collect", "fit_mean", "imitate"]
+
+
+@dataclass(frozen=True)
+class ImitationConfig:
+    """Budgets of :func:`imitate`."""
+
+    expert_episodes: int = 200
+    """Episodes the expert acts in (round 0)."""
+    dagger_rounds: int = 2
+    """DAgger rounds after round 0: the student acts, the expert labels."""
+    dagger_episodes: int = 100
+    """Episodes per DAgger round."""
+    epochs: int = 40
+    """Passes over the gathered data per fit."""
+    minibatch: int = 256
+    """States per Adam step."""
+    lr: float = 1e-3
+    """Adam's learning rate."""
+
+    def __post_init__(self) -> None:
+        for name in ("expert_episodes", "epochs", "minibatch"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"imitation {name} must be a positive integer, got {v!r}")
+        for name in ("dagger_rounds", "dagger_episodes"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"imitation {name} must be an integer >= 0, got {v!r}")
+        if not (math.isfinite(self.lr) and self.lr > 0):
+            raise ValueError(f"imitation lr must be a positive number, got {self.lr!r}")
+
+
+def collect(
+    env: ArmEnv, expert: ScriptedGrasp, episodes: int, seed: int, student: Callable[[np.ndarray], np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Roll out ``episodes`` episodes (environment seeds ``seed + i``), acting with ``student`` (a function of the raw
+    observation) or, if None, with the expert; label every visited state with the expert's action.
+
+    Returns ``(obs [M, D], expert actions [M, 9], success rate of the acting policy)``."""
+    obs_rows, act_rows, wins = [], [], 0
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed + i)
+        done, success = False, False
+        while not done:
+            label = expert.act()
+            obs_rows.append(obs.copy())
+            act_rows.append(label)
+            action = label if student is None else student(obs)
+            obs, _, terminated, truncated, info = env.step(action)
+            success = success or bool(info["success"])
+            done = terminated or truncated
+        wins += success
+    return np.asarray(obs_rows), np.clip(np.asarray(act_rows), -1.0, 1.0), wins / max(episodes, 1)
+
+
+def fit_mean(policy: Any, obs: torch.Tensor, actions: torch.Tensor, cfg: ImitationConfig, generator: torch.Generator) -> float:
+    """Fit ``policy``'s mean action on normalised ``obs [M, D]`` to ``actions [M, A]`` by mean squared error (Adam,
+    ``cfg.epochs`` shuffled passes); returns the final mean squared error over all the data."""
+    params = list(policy.mean_net.parameters())
+    opt = torch.optim.Adam(params, lr=cfg.lr)
+    n = obs.shape[0]
+    for _ in range(cfg.epochs):
+        for idx in torch.randperm(n, generator=generator).split(cfg.minibatch):
+            loss = ((policy.mean_net(obs[idx]) - actions[idx]) ** 2).mean()
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+    with torch.no_grad():
+        return float(((policy.mean_net(obs) - actions) ** 2).mean())
+
+
+def imitate(
+    train_config: TrainConfig,
+    run_dir: Path,
+    cfg: ImitationConfig = ImitationConfig(),
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Imitate the scripted grasp on ``train_config``'s Gripper task and write the student as iteration 0 of that run
+    in ``run_dir`` (which must not hold a run). Returns what each round gathered and reached (also ``imitation.json``)."""
+    from hrlp.checkpoint import checkpoint_exists
+    from hrlp.train import Trainer
+
+    if train_config.task.removeprefix("hrlp/").removesuffix("-v0") != "Gripper" or train_config.macro is not None:
+        raise ValueError(f"imitation trains a flat Gripper (the scripted grasp's task), not {train_config.task}")
+    run_dir = Path(run_dir)
+    if checkpoint_exists(run_dir / "checkpoint"):
+        raise ValueError(f"{run_dir} already holds a run; choose another directory")
+    from hrlp.envs import make
+
+    trainer = Trainer(train_config)  # the run's policy, normaliser and sampler, as TRPO would start them
+    try:
+        return _imitate(trainer, train_config, run_dir, cfg, log, make)
+    finally:
+        trainer.sampler.close()
+
+
+def _imitate(trainer: Any, train_config: TrainConfig, run_dir: Path, cfg: ImitationConfig, log: Callable[[str], None],
+             make: Callable[..., ArmEnv]) -> dict[str, Any]:  # fmt: skip
+    env = make("Gripper", episode_steps=train_config.episode_steps or 100, **train_config.task_kwargs).unwrapped
+    expert = ScriptedGrasp(env.physics)
+    policy, normalizer = trainer.policy, trainer.normalizer
+    generator = torch.Generator().manual_seed(train_config.seed)
+
+    def student(o: np.ndarray) -> np.ndarray:
+        x = normalizer(o, update=False)[None].astype(np.float32)
+        return policy.act_numpy(x, None, True)[0]
+
+    rounds: list[dict[str, Any]] = []
+    seed = 1_000_000 + 10_000 * train_config.seed  # apart from evaluation's seeds (10,000 + episode)
+    obs, act, success = collect(env, expert, cfg.expert_episodes, seed)
+    normalizer.update(obs)
+    all_obs, all_act = [obs], [act]
+    for r in range(cfg.dagger_rounds + 1):
+        x = torch.as_tensor(normalizer.normalize(np.concatenate(all_obs)), dtype=torch.float32)
+        y = torch.as_tensor(np.concatenate(all_act), dtype=torch.float32)
+        mse = fit_mean(policy, x, y, cfg, generator)
+        rounds.append({"round": r, "acting": "expert" if r == 0 else "student", "acting_success": success,
+                       "states": int(x.shape[0]), "fit_mse": mse})  # fmt: skip
+        log(f"imitation round {r}: {'expert' if r == 0 else 'student'} acted, success {success:.2f}; "
+            f"{x.shape[0]:,} labelled states, fit MSE {mse:.4f}")  # fmt: skip
+        if r == cfg.dagger_rounds:
+            break
+        obs, act, success = collect(env, expert, cfg.dagger_episodes, seed + 100_000 * (r + 1), student)
+        all_obs.append(obs)
+        all_act.append(act)
+    env.close()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    trainer.save(run_dir / "checkpoint")
+    config_path = run_dir / "config.json"
+    with writing(config_path):
+        config_path.write_text(json.dumps(train_config.to_json(), indent=2))
+    summary = {"imitation": asdict(cfg), "rounds": rounds}
+    out = run_dir / "imitation.json"
+    with writing(out):
+        out.write_text(json.dumps(summary, indent=1))
+    return summary
