@@ -33,17 +33,16 @@ def flat_config(algo: str, steps: int, seed: int, batch: int = 4_000) -> TrainCo
                        ppo=PPOConfig())  # fmt: skip
 
 
-def manager_config(algo: str, steps: int, seed: int, batch: int = 2_000) -> TrainConfig:
+def manager_config(algo: str, steps: int, seed: int, batch: int = 2_000, workers: int = 2) -> TrainConfig:
     """The demo's Manager (ReachAndGrip1, gripper + reacher, hand-over, k = 10, ``batch`` decisions per batch)."""
-    return dataclasses.replace(demo_config(steps=steps, seed=seed), algo=algo, batch_steps=batch)
+    return dataclasses.replace(demo_config(steps=steps, seed=seed, workers=workers), algo=algo, batch_steps=batch)
 
 
-def run_cell(kind: str, algo: str, steps: int, seeds: int, out: Path, episodes: int, batch: int) -> dict:
+def run_cell(kind: str, algo: str, steps: int, seeds: int, out: Path, episodes: int, batch: int, workers: int) -> dict:
     """Train and evaluate one (task, optimiser) cell over ``seeds`` seeds; returns its figures."""
-    make = flat_config if kind == "flat" else manager_config
     scores, walls = [], []
     for seed in range(seeds):
-        cfg = make(algo, steps, seed, batch)
+        cfg = flat_config(algo, steps, seed, batch) if kind == "flat" else manager_config(algo, steps, seed, batch, workers)
         run_dir = out / f"{kind}-{algo}-s{seed}"
         t = time.perf_counter()
         rows = list(train(cfg, run_dir, resume=(run_dir / "checkpoint").exists()))
@@ -66,6 +65,7 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=100, help="greedy evaluation episodes per run")
     ap.add_argument("--flat-batch", type=int, default=4_000, help="decisions per iteration of the flat runs")
     ap.add_argument("--manager-batch", type=int, default=2_000, help="decisions per iteration of the Manager runs")
+    ap.add_argument("--workers", type=int, default=2, help="sampling processes of the Manager runs (the demo's 2)")
     ap.add_argument("--only", choices=("flat", "manager"), default=None)
     ap.add_argument("--out", type=Path, default=Path("runs/ppo-vs-trpo"))
     a = ap.parse_args()
@@ -74,7 +74,7 @@ def main() -> None:
         if a.only not in (None, kind):
             continue
         for algo in ("trpo", "ppo"):
-            cells.append(run_cell(kind, algo, steps, a.seeds, a.out, a.episodes, batch))
+            cells.append(run_cell(kind, algo, steps, a.seeds, a.out, a.episodes, batch, a.workers))
     print("\n| task | optimiser | steps | mean over seeds | seeds |\n|---|---|---:|---:|---|")
     for c in cells:
         task = "Pendulum-v1 (greedy return)" if c["kind"] == "flat" else "ReachAndGrip1 Manager (greedy success)"
