@@ -27,6 +27,7 @@ import torch
 from hrlp.atomic import writing
 from hrlp.config import TrainConfig
 from hrlp.envs.arm_env import ArmEnv
+from hrlp.envs.registry import make
 from hrlp.skills.scripted import ScriptedGrasp
 
 __all__ = ["ImitationConfig", "collect", "fit_mean", "imitate"]
@@ -117,17 +118,15 @@ def imitate(
     run_dir = Path(run_dir)
     if checkpoint_exists(run_dir / "checkpoint"):
         raise ValueError(f"{run_dir} already holds a run; choose another directory")
-    from hrlp.envs import make
-
     trainer = Trainer(train_config)  # the run's policy, normaliser and sampler, as TRPO would start them
     try:
-        return _imitate(trainer, train_config, run_dir, cfg, log, make)
+        return _imitate(trainer, train_config, run_dir, cfg, log)
     finally:
         trainer.sampler.close()
 
 
-def _imitate(trainer: Any, train_config: TrainConfig, run_dir: Path, cfg: ImitationConfig, log: Callable[[str], None],
-             make: Callable[..., ArmEnv]) -> dict[str, Any]:  # fmt: skip
+def _imitate(trainer: Any, train_config: TrainConfig, run_dir: Path, cfg: ImitationConfig,
+             log: Callable[[str], None]) -> dict[str, Any]:  # fmt: skip
     env = make("Gripper", episode_steps=train_config.episode_steps or 100, **train_config.task_kwargs).unwrapped
     expert = ScriptedGrasp(env.physics)
     policy, normalizer = trainer.policy, trainer.normalizer
