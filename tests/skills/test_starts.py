@@ -68,3 +68,14 @@ def test_start_bank_files_are_written_atomically_and_read_without_pickle(tmp_pat
         np.testing.assert_array_equal(z["plain_qvel"], v)
         assert str(z["meta_skill"]) == "x"
     assert [p.name for p in tmp_path.iterdir()] == ["b.npz"]
+
+
+def test_scripted_grasp_records_demonstration_starts_from_its_successful_episodes():
+    from hrlp.skills.scripted import ScriptedGraspConfig
+
+    q, v = record_grip_starts(ScriptedGraspConfig(), math.pi, 50, seed=0, every=4, episode_steps=100, num_envs=2)
+    assert q.shape == (50, 16) and v.shape == (50, 15)
+    env = make("Gripper")
+    env.reset(seed=0)
+    assert any(_gripped(env, q[i], v[i]) for i in range(25))  # the first whole episode (25 states) grips
+    assert not _gripped(env, q[0], v[0])  # and starts from an open start, not a grip

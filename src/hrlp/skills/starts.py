@@ -19,6 +19,7 @@ import numpy as np
 
 from hrlp.atomic import atomic_path
 from hrlp.envs import make
+from hrlp.skills.scripted import ScriptedGrasp, ScriptedGraspConfig
 from hrlp.skills.skill import Skill
 
 #: The Gripper task arguments of the shipped Gripper skill's training starts (the `shipped-skills` preset).
@@ -26,7 +27,7 @@ GRIP_START_TASK_ARGS: dict[str, object] = {"start_distance": (0.0, 0.09), "finge
 
 
 def record_grip_starts(
-    gripper: Skill,
+    gripper: Skill | ScriptedGraspConfig,
     angle_range: float,
     states: int,
     *,
@@ -39,9 +40,11 @@ def record_grip_starts(
     """Physics states ``(qpos [states, nq], qvel [states, nv])`` along the ``gripper``'s successful Gripper episodes.
 
     Episodes start from the Gripper task's close, open-claw starts with the capsule's angle in
-    ``[-angle_range, angle_range]``; the skill acts with its mean action. Every ``every``-th state of an episode in
-    which Definition 1 held at some step is kept, until ``states`` are collected. ``progress(kept, episodes)`` is
-    called after every finished episode.
+    ``[-angle_range, angle_range]``; a skill acts with its mean action, a :class:`ScriptedGraspConfig` stands for the
+    scripted grasp (:class:`~hrlp.skills.scripted.ScriptedGrasp`, one per environment): its states show a top-down
+    approach and grip that a policy trained from them can start from (demonstration starts). Every ``every``-th state
+    of an episode in which Definition 1 held at some step is kept, until ``states`` are collected.
+    ``progress(kept, episodes)`` is called after every finished episode.
     """
     if states < 1 or every < 1 or episode_steps < 1 or num_envs < 1:
         raise ValueError("states, every, episode_steps and num_envs must be positive integers")
@@ -51,6 +54,16 @@ def record_grip_starts(
         make("Gripper", episode_steps=episode_steps, angle_range=angle_range, **GRIP_START_TASK_ARGS) for _ in range(num_envs)
     ]
     obs = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(envs)])
+    if isinstance(gripper, ScriptedGraspConfig):
+        experts = [ScriptedGrasp(env.unwrapped.physics, gripper) for env in envs]
+
+        def act(o: np.ndarray) -> np.ndarray:
+            return np.clip(np.stack([e.act() for e in experts]), -1.0, 1.0)
+    else:
+
+        def act(o: np.ndarray) -> np.ndarray:
+            return gripper.act(o, np.zeros((num_envs, 0)))
+
     traj: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in envs]
     gripped = [False] * num_envs
     kept_q: list[np.ndarray] = []
@@ -62,7 +75,7 @@ def record_grip_starts(
             if steps[i] % every == 0:
                 d = env.unwrapped.physics.data
                 traj[i].append((d.qpos.copy(), d.qvel.copy()))
-        actions = gripper.act(obs, np.zeros((num_envs, 0)))
+        actions = act(obs)
         for i, env in enumerate(envs):
             o, _, term, trunc, info = env.step(actions[i])
             steps[i] += 1
