@@ -12,6 +12,8 @@ from the bank and from the recipe's own start set, with Wilson 95% intervals. Th
 Each run is also evaluated from the paper's default starts (H 5-9 cm from C, the claw at rest). ``--evaluate RUN``
 evaluates a finished Gripper run of any recipe instead of training one (the from-scratch Grippers of
 ``gripper-variants.json``'s ``from_scratch``, trained with ``hrlp train Gripper ...``: docs/results/README.md).
+``--graspable D V`` adds the bank's states from which a grip can start (d(H, C) <= D metres, the capsule slower than
+V m/s: :func:`hrlp.skills.dagger.graspable`), written to ``OUT/graspable.npz``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 from rich.console import Console
 
 from hrlp.checkpoint import checkpoint_exists
@@ -40,10 +43,41 @@ START_SETS = (
 """Where evaluation episodes start: the bank's hand-over states, the run's own start set, the paper's default starts."""
 
 
-def evaluate_gripper(run: Path, bank: Path, episodes: int, label: str) -> dict[str, list[float]]:
-    """Greedy success of the Gripper run ``run`` from each of :data:`START_SETS`: ``[mean, Wilson low, high]``."""
+def graspable_bank(bank: Path, out: Path, max_hand_distance: float, max_capsule_speed: float) -> Path:
+    """Write the states of ``bank`` from which a grip can start (:func:`hrlp.skills.dagger.graspable`) to ``out``."""
+    from hrlp.envs import make
+    from hrlp.envs.tasks import HANDOVER_BANK, start_bank
+    from hrlp.skills.dagger import graspable
+    from hrlp.skills.starts import write_start_bank
+
+    qpos, qvel = start_bank(str(bank))
+    env = make("Gripper")
+    env.reset(seed=0)
+    physics = env.unwrapped.physics
+    keep = []
+    for q, v in zip(qpos, qvel, strict=True):
+        physics.set_state_vectors(q, v)
+        physics.forward()
+        keep.append(graspable(physics, max_hand_distance, max_capsule_speed))
+    env.close()
+    mask = np.array(keep)
+    if not mask.any():
+        raise SystemExit(f"--graspable: none of the {len(mask)} states of {bank} is within the limits")
+    print(f"{bank}: {mask.sum()} of {len(mask)} states with d(H, C) <= {max_hand_distance} m and the capsule slower than "
+          f"{max_capsule_speed} m/s", flush=True)  # fmt: skip
+    meta = {"source": str(bank), "max_hand_distance": str(max_hand_distance), "max_capsule_speed": str(max_capsule_speed)}
+    return write_start_bank(out, {HANDOVER_BANK: (qpos[mask], qvel[mask])}, meta)
+
+
+def evaluate_gripper(
+    run: Path, bank: Path, episodes: int, label: str, graspable: Path | None = None
+) -> dict[str, list[float]]:
+    """Greedy success of the Gripper run ``run`` from each of :data:`START_SETS` (and, given a ``graspable`` bank, from
+    its states as ``graspable_handover``): ``[mean, Wilson low, high]``."""
     results = {}
-    for where, kwargs in START_SETS:
+    sets = [*START_SETS, *([("graspable_handover", {"starts": str(graspable.resolve()), "starts_fraction": 1.0})]
+                           if graspable is not None else [])]  # fmt: skip
+    for where, kwargs in sets:
         ev = evaluate_run(run, episodes=episodes, task_kwargs={"starts": str(bank.resolve()), **kwargs})
         assert ev.success is not None
         results[where] = [ev.success.mean, ev.success.low, ev.success.high]
@@ -61,15 +95,23 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--evaluate", type=Path, help="a finished Gripper run to evaluate (nothing is trained)")
+    ap.add_argument(
+        "--graspable",
+        type=float,
+        nargs=2,
+        metavar=("D", "V"),
+        help="also evaluate from the bank's states with d(H, C) <= D m and the capsule slower than V m/s",
+    )
     args = ap.parse_args()
     bank = Path(args.bank) if Path(args.bank).is_file() else ap.error(f"--bank {args.bank}: no such file")
     if (args.out / "results.json").exists():
         ap.error(f"{args.out / 'results.json'} exists; choose another --out")
+    args.out.mkdir(parents=True, exist_ok=True)
+    graspable = None if args.graspable is None else graspable_bank(bank, args.out / "graspable.npz", *args.graspable)
     if args.evaluate is not None:
         if not checkpoint_exists(args.evaluate / "checkpoint"):
             ap.error(f"--evaluate {args.evaluate}: no checkpoint there")
-        results = evaluate_gripper(args.evaluate, bank, args.episodes, str(args.evaluate))
-        args.out.mkdir(parents=True, exist_ok=True)
+        results = evaluate_gripper(args.evaluate, bank, args.episodes, str(args.evaluate), graspable)
         (args.out / "results.json").write_text(json.dumps(results, indent=2))
         return
     library = locate_skill("gripper", search_roots())
@@ -79,7 +121,7 @@ def main() -> None:
     cfg = dataclasses.replace(cfg, task_kwargs={**cfg.task_kwargs, **VARIANTS[args.variant]})
     run = args.out / "skill"
     train_with_progress(cfg, run, checkpoint_exists(run / "checkpoint"), Console(stderr=True), f"gripper {args.variant}")
-    results = evaluate_gripper(run, bank, args.episodes, f"{args.variant}, {args.steps:,} steps")
+    results = evaluate_gripper(run, bank, args.episodes, f"{args.variant}, {args.steps:,} steps", graspable)
     (args.out / "results.json").write_text(json.dumps(results, indent=2))
 
 

@@ -1,10 +1,11 @@
 """Manager training throughput against flat training on the same task, in one run.
 
-Both train on ReachAndGrip2 with 16 environments: the flat policy with batches of ``--flat-batch`` environment
-steps, the Manager (shipped skills gripper + reacher, k = 15) with batches of ``--manager-batch`` decisions
-(about 15 environment steps each). Iterations of the two alternate so that machine noise hits both alike.
-Reported per kind: environment steps per second of sampling alone and of whole iterations (sampling + update),
-the share of the cores' time spent inside ``mj_step`` (``time/physics_share``), and the Manager / flat ratio.
+Both train on ReachAndGrip2 with 16 environments and the paper's settings (``hrlp.config.PAPER_SETTINGS``): the flat
+policy with batches of ``--flat-batch`` environment steps, the Manager (shipped skills gripper + reacher, k = 15) with
+batches of ``--manager-batch`` decisions (about 15 environment steps each). Iterations of the two alternate so that
+machine noise hits both alike. Reported per kind: environment steps per second of sampling alone and of whole
+iterations (sampling + update), the share of the cores' time spent inside ``mj_step`` (``time/physics_share``), and the
+Manager / flat ratio.
 
     python benchmarks/manager_speed.py [--rounds 3] [--flat-batch 15000] [--manager-batch 1000] [--workers 2]
 
@@ -16,9 +17,11 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from dataclasses import replace
 
 import torch
 
+from hrlp.config import PAPER_SETTINGS, with_settings
 from hrlp.skills.macro_env import MacroSpec
 from hrlp.train import TrainConfig, Trainer
 
@@ -32,13 +35,17 @@ def main() -> None:  # run under `if __name__ == "__main__"`: sampling workers a
     args = ap.parse_args()
     torch.set_num_threads(1)
     spec = MacroSpec(("gripper", "reacher"), k=15)
+
+    def config(**kw: object) -> TrainConfig:  # the paper's settings (16 envs, one process), as docs/benchmarks.md measured
+        return replace(with_settings(TrainConfig(task="ReachAndGrip2"), PAPER_SETTINGS), **kw)  # type: ignore[arg-type]
+
     trainers = {
-        "flat": Trainer(TrainConfig(task="ReachAndGrip2", batch_steps=args.flat_batch, num_envs=16)),
-        "Manager": Trainer(TrainConfig(task="ReachAndGrip2", batch_steps=args.manager_batch, num_envs=16, macro=spec)),
+        "flat": Trainer(config(batch_steps=args.flat_batch)),
+        "Manager": Trainer(config(batch_steps=args.manager_batch, macro=spec)),
     }
     if args.workers > 1:
-        cfg = TrainConfig(task="ReachAndGrip2", batch_steps=args.manager_batch, num_envs=16, macro=spec, workers=args.workers)
-        trainers[f"Manager, {args.workers} workers"] = Trainer(cfg)
+        trainers[f"Manager, {args.workers} workers"] = Trainer(config(batch_steps=args.manager_batch, macro=spec,
+                                                                      workers=args.workers))  # fmt: skip
     sample: dict[str, list[float]] = {k: [] for k in trainers}
     whole: dict[str, list[float]] = {k: [] for k in trainers}
     physics: dict[str, list[float]] = {k: [] for k in trainers}

@@ -22,6 +22,7 @@ def _run(kind: str, seed: int, steps: int, out: Path, episodes: int, flat_batch:
 
     from hrlp.algos.trpo import TRPOConfig
     from hrlp.checkpoint import checkpoint_exists
+    from hrlp.config import PAPER_SETTINGS, with_settings
     from hrlp.evaluate import evaluate_run
     from hrlp.skills.macro_env import MacroSpec
     from hrlp.train import TrainConfig, train
@@ -30,10 +31,11 @@ def _run(kind: str, seed: int, steps: int, out: Path, episodes: int, flat_batch:
     run = out / f"{kind}-s{seed}"
     if kind == "manager":
         # The headline's Manager settings (2,000 decisions per batch, max KL 0.02) over the Gripper and the Reacher, k = 15.
-        cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=2_000, num_envs=16, seed=seed,
+        cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=2_000, seed=seed,
                           macro=MacroSpec(("gripper", "reacher"), k=15), trpo=TRPOConfig(max_kl=0.02))  # fmt: skip
     else:
-        cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=flat_batch, num_envs=16, seed=seed)
+        cfg = TrainConfig(task="ReachAndGrip2", steps=steps, batch_steps=flat_batch, seed=seed)
+    cfg = with_settings(cfg, PAPER_SETTINGS)  # one process, 16 environments: the settings its figures were measured with
     resume = checkpoint_exists(run / "checkpoint")
     for _ in train(cfg, run, resume=resume):
         pass

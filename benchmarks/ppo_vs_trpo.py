@@ -21,16 +21,17 @@ import statistics
 import time
 from pathlib import Path
 
-from hrlp.config import PPOConfig, TrainConfig
+from hrlp.config import PAPER_SETTINGS, PPOConfig, TrainConfig, with_settings
 from hrlp.evaluate import evaluate_run
 from hrlp.experiments.demo import demo_config
 from hrlp.train import train
 
 
 def flat_config(algo: str, steps: int, seed: int, batch: int = 4_000) -> TrainConfig:
-    """Pendulum-v1 with 16 environments and ``batch``-decision batches, policy step ``algo``."""
-    return TrainConfig(task="Pendulum-v1", steps=steps, batch_steps=batch, num_envs=16, seed=seed, algo=algo,
-                       ppo=PPOConfig())  # fmt: skip
+    """Pendulum-v1 with ``batch``-decision batches, policy step ``algo``, the paper's settings otherwise (16
+    environments, one process: those its figures were measured with)."""
+    cfg = TrainConfig(task="Pendulum-v1", steps=steps, batch_steps=batch, seed=seed, algo=algo, ppo=PPOConfig())
+    return with_settings(cfg, PAPER_SETTINGS)
 
 
 def manager_config(algo: str, steps: int, seed: int, batch: int = 2_000, workers: int = 2) -> TrainConfig:

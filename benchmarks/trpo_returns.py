@@ -5,7 +5,13 @@ Each library trains one policy per seed; every final policy is then scored on th
 (Student t over seeds) per library. One torch thread.
 
     python benchmarks/trpo_returns.py [--steps 200000] [--seeds 3] [--batch-steps 5000] [--episodes 20]
-                                      [--hrlp default|fastest]
+                                      [--hrlp paper|defaults|fastest[,...]]
+
+hrlp's settings (``HRLP_SETTINGS``): ``paper``, the paper's (``hrlp.config.PAPER_SETTINGS``: one process, 16
+environments, exact Fisher-vector products, the baseline by 25 L-BFGS iterations on every state); ``defaults``,
+``TrainConfig``'s (a sampling worker per core, 64 environments, Fisher-vector products on 10% of the batch, the baseline
+by 10 iterations on every 4th time step); ``fastest``, the defaults with 2 workers whatever the cores. Every setting
+trains with ``--batch-steps`` decisions per iteration.
 """
 
 from __future__ import annotations
@@ -51,25 +57,26 @@ def sb3_score(steps: int, seed: int, episodes: int) -> tuple[float, float]:
     return evaluate(lambda o: model.predict(o, deterministic=True)[0], episodes), wall
 
 
-#: hrlp settings compared: its defaults, and benchmarks/trpo_speed.py's fastest (2 sampling workers, Fisher-vector
-#: products on 10% of the batch, 64 environments, the baseline fitted by 10 L-BFGS iterations on every 4th time step).
-HRLP_SETTINGS = {
-    "default": {},
-    "fastest": {"workers": 2, "num_envs": 64, "fisher_fraction": 0.1, "value_iters": 10, "value_fraction": 0.25},
-}
+def _hrlp_settings() -> dict[str, dict[str, object]]:
+    from hrlp.config import PAPER_SETTINGS
+
+    fastest = {"workers": 2, "num_envs": 64, "trpo.fisher_fraction": 0.1, "value.max_iter": 10, "value.fraction": 0.25}
+    return {"paper": dict(PAPER_SETTINGS), "defaults": {}, "fastest": fastest}
 
 
-def hrlp_score(steps: int, seed: int, episodes: int, batch_steps: int, num_envs: int, settings: str = "default"
+#: hrlp settings compared (``hrlp.config.with_settings``' names): the paper's, TrainConfig's defaults, and
+#: benchmarks/trpo_speed.py's fastest (2 sampling workers, Fisher-vector products on 10% of the batch, 64 environments,
+#: the baseline fitted by 10 L-BFGS iterations on every 4th time step: the defaults on a two-core machine).
+HRLP_SETTINGS = _hrlp_settings()
+
+
+def hrlp_score(steps: int, seed: int, episodes: int, batch_steps: int, num_envs: int | None, settings: str = "paper"
                ) -> tuple[float, float]:  # fmt: skip
-    from hrlp.algos.trpo import TRPOConfig
-    from hrlp.algos.value import ValueFitConfig
+    from hrlp.config import with_settings
     from hrlp.train import TrainConfig, Trainer
 
-    kw = dict(HRLP_SETTINGS[settings])
-    trpo = TRPOConfig(fisher_fraction=kw.pop("fisher_fraction", 1.0))
-    value = ValueFitConfig(max_iter=kw.pop("value_iters", 25), fraction=kw.pop("value_fraction", 1.0))
-    kw.setdefault("num_envs", num_envs)
-    trainer = Trainer(TrainConfig(task=TASK, steps=steps, batch_steps=batch_steps, seed=seed, trpo=trpo, value=value, **kw))
+    kw = {**HRLP_SETTINGS[settings], "batch_steps": batch_steps, **({} if num_envs is None else {"num_envs": num_envs})}
+    trainer = Trainer(with_settings(TrainConfig(task=TASK, steps=steps, seed=seed), kw))
     t = time.perf_counter()
     try:
         while trainer.env_steps < trainer.cfg.steps:
@@ -100,26 +107,37 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=3, help="seeds per library: first-seed .. first-seed + seeds - 1")
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--batch-steps", type=int, default=5_000, help="hrlp env steps per TRPO iteration")
-    ap.add_argument("--num-envs", type=int, default=16, help="hrlp environments stepped together")
+    ap.add_argument("--num-envs", type=int, default=None, help="hrlp environments stepped together (default: the setting's)")
     ap.add_argument("--episodes", type=int, default=20, help="evaluation episodes per final policy")
     ap.add_argument("--libs", default="hrlp,sb3", help="comma-separated subset of hrlp,sb3")
-    ap.add_argument("--hrlp", choices=list(HRLP_SETTINGS), default="default", help="hrlp's settings (see HRLP_SETTINGS)")
+    ap.add_argument("--hrlp", default="paper", help=f"hrlp's settings, comma-separated: {', '.join(HRLP_SETTINGS)}")
     args = ap.parse_args()
+    settings = [s.strip() for s in args.hrlp.split(",") if s.strip()]
+    if unknown := [s for s in settings if s not in HRLP_SETTINGS]:
+        ap.error(f"--hrlp: unknown settings {unknown}; known: {', '.join(HRLP_SETTINGS)}")
     torch.set_num_threads(1)
 
-    runners = {
-        "hrlp": lambda s: hrlp_score(args.steps, s, args.episodes, args.batch_steps, args.num_envs, args.hrlp),
-        "sb3": lambda s: sb3_score(args.steps, s, args.episodes),
-    }
-    scores: dict[str, list[float]] = {}
-    for lib in args.libs.split(","):
-        scores[lib] = []
-        for seed in range(args.first_seed, args.first_seed + args.seeds):
-            score, wall = runners[lib](seed)
-            scores[lib].append(score)
-            print(f"{lib:<5} seed {seed}: return {score:8.2f}  (training {wall:.0f} s)", flush=True)
+    def hrlp(setting: str) -> Callable[[int], tuple[float, float]]:
+        return lambda s: hrlp_score(args.steps, s, args.episodes, args.batch_steps, args.num_envs, setting)
 
-    print(f"\n{TASK}, {args.steps} env steps, {args.seeds} seeds, {args.episodes} deterministic episodes each")
+    runners: dict[str, Callable[[int], tuple[float, float]]] = {}  # one label per hrlp setting ("hrlp" for one alone)
+    for lib in args.libs.split(","):
+        if lib == "hrlp":
+            runners.update({"hrlp": hrlp(settings[0])} if len(settings) == 1 else {f"hrlp-{s}": hrlp(s) for s in settings})
+        else:
+            runners["sb3"] = lambda s: sb3_score(args.steps, s, args.episodes)
+    scores: dict[str, list[float]] = {}
+    for label, run in runners.items():
+        scores[label] = []
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
+            score, wall = run(seed)
+            scores[label].append(score)
+            print(f"{label:<5} seed {seed}: return {score:8.2f}  (training {wall:.0f} s)", flush=True)
+
+    print(
+        f"\n{TASK}, {args.steps} env steps, {args.seeds} seeds, {args.episodes} deterministic episodes each; hrlp: "
+        f"{', '.join(settings)}"
+    )
     for lib, xs in scores.items():
         m, h = ci95(xs)
         print(f"{lib:<5} {m:8.2f} +- {h:.2f}")

@@ -9,10 +9,13 @@ ceiling, the same on the arm task ReachAndGrip2, and the peak resident memory of
     python benchmarks/trpo_speed.py [--steps 100000] [--batch-steps 25000] [--arm-steps 150000] [--workers 2]
                                     [--fisher-fraction 0.1] [--fast-envs 64] [--skip tianshou]
 
-hrlp runs four ways: its defaults in one process; with ``--workers`` sampling processes; "fast", which adds
-Fisher-vector products on a 10% subsample (Schulman et al. 2015, Section 6) and 64 environments; and "fastest", which
-also fits the baseline with 10 L-BFGS iterations instead of 25, on every 4th time step of the batch.
-``benchmarks/trpo_returns.py --hrlp fastest`` checks that the fastest settings still learn as well as sb3-contrib.
+hrlp runs five ways: "paper", the paper's settings in one process (``hrlp.config.PAPER_SETTINGS``, ``hrlp train
+--paper-settings``: 16 environments, exact Fisher-vector products, the baseline by 25 L-BFGS iterations on every state);
+with ``--workers`` sampling processes; "fast", which adds Fisher-vector products on a 10% subsample (Schulman et al.
+2015, Section 6) and 64 environments; "fastest", which also fits the baseline with 10 L-BFGS iterations instead of 25,
+on every 4th time step of the batch; and "defaults", ``TrainConfig``'s defaults with no option at all (what ``hrlp
+train Pusher-v5`` runs: a worker per core, its 50,000-step batch unless ``--defaults-batch-steps``).
+``benchmarks/trpo_returns.py --hrlp fastest`` (and ``--hrlp defaults``) checks that they still learn as well.
 
 Goals: hrlp >= 10x sb3-contrib and >= 3x Tianshou in env steps/s; >= 50% of hrlp's wall time in physics on the
 arm tasks; a 50,000-step batch within 1 GB RSS.
@@ -102,20 +105,17 @@ def tianshou_steps_per_s(steps: int, seed: int, num_envs: int = 16) -> float:
     return done / (time.perf_counter() - t)
 
 
-def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 1, fisher_fraction: float = 1.0,
-             num_envs: int = 16, value_iters: int = 25, value_fraction: float = 1.0) -> dict[str, float]:  # fmt: skip
-    """hrlp TRPO (batched inference over ``num_envs`` envs, ``workers`` sampling processes): steps/s and step-weighted
-    time shares (with workers, the env and inference shares are those of the slowest worker; they overlap with the
-    value fit, which runs in the main process meanwhile). ``physics`` is the time measured inside ``mj_step`` in the
-    run (hrlp's tasks report it; NaN on Gymnasium ids) over cores x wall."""
-    from hrlp.algos.trpo import TRPOConfig
-    from hrlp.algos.value import ValueFitConfig, fit_value
+def hrlp_run(task: str, steps: int, seed: int, settings: dict[str, object]) -> dict[str, float]:
+    """hrlp TRPO with ``TrainConfig``'s defaults but ``settings`` (``hrlp.config.with_settings``' names, e.g.
+    ``trpo.fisher_fraction``): steps/s and step-weighted time shares (with workers, the env and inference shares are
+    those of the slowest worker; they overlap with the value fit, which runs in the main process meanwhile).
+    ``physics`` is the time measured inside ``mj_step`` in the run (hrlp's tasks report it; NaN on Gymnasium ids) over
+    cores x wall; ``workers`` the sampling processes the run used."""
+    from hrlp.algos.value import fit_value
+    from hrlp.config import with_settings
     from hrlp.train import TrainConfig, Trainer
 
-    trpo = TRPOConfig(fisher_fraction=fisher_fraction)
-    cfg = TrainConfig(task=task, steps=steps, batch_steps=batch_steps, num_envs=num_envs, seed=seed, workers=workers,
-                      trpo=trpo, value=ValueFitConfig(max_iter=value_iters, fraction=value_fraction))  # fmt: skip
-    trainer = Trainer(cfg)
+    trainer = Trainer(with_settings(TrainConfig(task=task, steps=steps, seed=seed), settings))
     wall = 0.0
     shares = {"env": 0.0, "inference": 0.0, "value_fit": 0.0, "update": 0.0, "physics": 0.0}
     try:
@@ -135,7 +135,7 @@ def hrlp_run(task: str, steps: int, batch_steps: int, seed: int, workers: int = 
     finally:
         trainer.sampler.close()
     return {"steps": trainer.env_steps, "wall": wall, "steps_per_s": trainer.env_steps / wall,
-            **{k: v / wall for k, v in shares.items()}}  # fmt: skip
+            "workers": trainer.cfg.workers, **{k: v / wall for k, v in shares.items()}}  # fmt: skip
 
 
 def physics_step_seconds(model: mujoco.MjModel, data: mujoco.MjData, nsub: int, n: int, episode: int,
@@ -191,8 +191,11 @@ def rss_child(task: str, batch_steps: int, baseline: bool) -> None:
     torch.set_num_threads(1)
     from hrlp.train import TrainConfig, Trainer
 
-    if not baseline:
-        trainer = Trainer(TrainConfig(task=task, steps=batch_steps, batch_steps=batch_steps, num_envs=16, seed=0))
+    if not baseline:  # one process (the paper's settings), so that the whole batch is this process's memory
+        from hrlp.config import PAPER_SETTINGS, with_settings
+
+        cfg = with_settings(TrainConfig(task=task, steps=batch_steps, batch_steps=batch_steps, seed=0), PAPER_SETTINGS)
+        trainer = Trainer(cfg)
         trainer.iterate()
         trainer.sampler.close()
     hwm = next(line for line in open("/proc/self/status") if line.startswith("VmHWM:"))
@@ -213,6 +216,8 @@ def main() -> None:
     ap.add_argument("--fast-envs", type=int, default=64, help="environments of the fast hrlp run")
     ap.add_argument("--fastest-value-iters", type=int, default=10, help="L-BFGS iterations of the fastest run's value fit")
     ap.add_argument("--fastest-value-fraction", type=float, default=0.25, help="share of time steps the fastest run fits on")
+    ap.add_argument("--defaults-batch-steps", type=int, default=None,
+                    help="batch of the defaults run (default: TrainConfig's, as hrlp train runs it)")  # fmt: skip
     ap.add_argument("--skip", default="", help="comma-separated: pusher (hrlp on it),sb3,tianshou,arm,rss")
     ap.add_argument("--rss-child", help=argparse.SUPPRESS)
     ap.add_argument("--rss-baseline", action="store_true", help=argparse.SUPPRESS)
@@ -223,18 +228,27 @@ def main() -> None:
     torch.set_num_threads(1)
     skip = set(filter(None, args.skip.split(",")))
 
+    from hrlp.config import PAPER_SETTINGS, TrainConfig
+
     rates: dict[str, float] = {}
     runs: dict[str, dict[str, float]] = {}
-    fast = {"workers": args.workers, "fisher_fraction": args.fisher_fraction, "num_envs": args.fast_envs}
+    paper = {**PAPER_SETTINGS, "batch_steps": args.batch_steps}
+    paper_name = "hrlp paper (--paper-settings: 1 process, 16 envs, exact Fisher, baseline 25 L-BFGS iterations)"
+    fast = {**paper, "workers": args.workers, "trpo.fisher_fraction": args.fisher_fraction, "num_envs": args.fast_envs}
     fast_name = f"hrlp fast ({args.workers} workers, Fisher {args.fisher_fraction:g}, {args.fast_envs} envs)"
-    fastest = {**fast, "value_iters": args.fastest_value_iters, "value_fraction": args.fastest_value_fraction}
+    fastest = {**fast, "value.max_iter": args.fastest_value_iters, "value.fraction": args.fastest_value_fraction}
     fastest_name = (f"hrlp fastest (fast, baseline: {args.fastest_value_iters} L-BFGS iterations on "
                     f"{args.fastest_value_fraction:.0%} of the steps)")  # fmt: skip
-    configs = {"hrlp": {}, f"hrlp {args.workers} workers": {"workers": args.workers}, fast_name: fast, fastest_name: fastest}
+    defaults = {} if args.defaults_batch_steps is None else {"batch_steps": args.defaults_batch_steps}
+    defaults_name = (f"hrlp defaults (no options: batch {args.defaults_batch_steps or TrainConfig.batch_steps:,}, "
+                     "a worker per core)")  # fmt: skip
+    configs = {paper_name: paper, f"hrlp {args.workers} workers": {**paper, "workers": args.workers}, fast_name: fast,
+               fastest_name: fastest, defaults_name: defaults}  # fmt: skip
+    with_workers = {f"hrlp {args.workers} workers", fast_name, fastest_name}  # skipped with --workers 1
     for name, kw in configs.items():
-        if "pusher" in skip or (name != "hrlp" and args.workers < 2):
+        if "pusher" in skip or (name in with_workers and args.workers < 2):
             continue
-        runs[name] = hrlp_run(TASK, args.steps, args.batch_steps, args.seed, **kw)
+        runs[name] = hrlp_run(TASK, args.steps, args.seed, kw)
         rates[name] = runs[name]["steps_per_s"]
         print(f"{name}: {rates[name]:.0f} steps/s", flush=True)
     if "sb3" not in skip:
@@ -254,7 +268,7 @@ def main() -> None:
     for name, r in rates.items():
         print(f"{name:<52} {r:>8.0f} " + " ".join(f"{rates[n] / r:>19.2f}x" for n in runs))
     for name, hr in runs.items():
-        cores = 1 if name == "hrlp" else 2
+        cores = int(hr["workers"])
         share = hr["steps"] * phys / (hr["wall"] * cores)
         print(
             f"{name}: time shares env {hr['env']:.1%}, inference {hr['inference']:.1%}, value fit {hr['value_fit']:.1%}, "
@@ -263,11 +277,11 @@ def main() -> None:
 
     if "arm" not in skip:
         aphys = arm_physics(args.physics_steps)
-        for name, kw in (("hrlp", {}), (fast_name, fast), (fastest_name, fastest)):
-            if name != "hrlp" and args.workers < 2:
+        for name, kw in ((paper_name, paper), (fast_name, fast), (fastest_name, fastest), (defaults_name, defaults)):
+            if name in with_workers and args.workers < 2:
                 continue
-            arm = hrlp_run(ARM_TASK, args.arm_steps, args.batch_steps, args.seed, **kw)
-            cores = 1 if name == "hrlp" else 2
+            arm = hrlp_run(ARM_TASK, args.arm_steps, args.seed, kw)
+            cores = int(arm["workers"])
             print(
                 f"\n{ARM_TASK}, {name}, {arm['steps']} env steps: {arm['steps_per_s']:.0f} steps/s, physics alone "
                 f"{1 / aphys:.0f} per core ({aphys * 1e6:.0f} us/step)"

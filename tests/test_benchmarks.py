@@ -14,10 +14,14 @@ CASES = {  # script: (arguments, a line its output must contain)
     "stability.py": ("--steps 200 --tasks Reacher", "unstable episodes"),
     "manager_speed.py": ("--rounds 1 --flat-batch 400 --manager-batch 40 --workers 1", "Manager / flat: sampling"),
     "trpo_speed.py": (
-        "--steps 1000 --batch-steps 500 --arm-steps 500 --physics-steps 300 --workers 1 --skip sb3,tianshou,rss",
+        "--steps 1000 --batch-steps 500 --arm-steps 500 --physics-steps 300 --workers 1 --defaults-batch-steps 500 "
+        "--skip sb3,tianshou,rss",
         "mj_step share of 1 core(s) x wall: measured in the run",
     ),
-    "trpo_returns.py": ("--libs hrlp --steps 1000 --batch-steps 500 --seeds 1 --episodes 1", "hrlp"),
+    "trpo_returns.py": (
+        "--libs hrlp --hrlp paper,defaults --steps 1000 --batch-steps 500 --seeds 1 --episodes 1",
+        "hrlp-defaults",
+    ),
     "reliability.py": ("--only physics --blow-ups 2", "forced physics blow-ups: 24 (3 kinds x 2 steps x 4 tasks"),
     "scripted_grasp.py": ("--episodes 2 --steps 30 --no-bank", "episodes; capsule pushed > 3 cm in"),
     "batched_step.py": ("--world-steps 40 --episode-steps 30 --repeats 1 --n 4", "fastest:"),
@@ -69,9 +73,11 @@ def test_gripper_variants_retrains_the_shipped_gripper_and_reports_both_start_se
     assert "from paper_default starts: success" in out.stdout
     # --evaluate: a finished run of any recipe, nothing trained; an existing results.json is never replaced.
     out = _run("gripper_variants.py", f"--bank {tmp_path / 'bank.npz'} --episodes 1 --evaluate {tmp_path / 'v' / 'skill'} "
-               f"--out {tmp_path / 'e'}", tmp_path)  # fmt: skip
+               f"--graspable 0.2 0.1 --out {tmp_path / 'e'}", tmp_path)  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
-    assert set(__import__("json").loads((tmp_path / "e" / "results.json").read_text())) == {"handover", "own", "paper_default"}
+    assert "1 of 1 states with d(H, C) <= 0.2 m" in out.stdout
+    assert set(__import__("json").loads((tmp_path / "e" / "results.json").read_text())) == {
+        "handover", "own", "paper_default", "graspable_handover"}  # fmt: skip
     again = _run("gripper_variants.py", f"--bank {tmp_path / 'bank.npz'} --evaluate {tmp_path / 'v' / 'skill'} "
                  f"--out {tmp_path / 'e'}", tmp_path)  # fmt: skip
     assert again.returncode == 2 and "exists" in again.stderr

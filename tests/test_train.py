@@ -35,7 +35,9 @@ def test_training_writes_logs_and_a_checkpoint_that_evaluates(tmp_path):
         logged = list(csv.DictReader(f))
     assert len(logged) == 2 and float(logged[1]["env_steps"]) == 400
     assert any((tmp_path / "tb").iterdir())
-    assert TrainConfig.from_json(json.loads((tmp_path / "config.json").read_text())) == cfg
+    # The config as run: workers left to the machine (0) are recorded as the count used ($HRLP_WORKERS=1 in the tests).
+    assert TrainConfig.from_json(json.loads((tmp_path / "config.json").read_text())) == cfg.resolved() != cfg
+    assert cfg.resolved().workers == 1
     tensors, meta = load_checkpoint(tmp_path / "checkpoint")
     assert meta["iteration"] == 2 and "policy.log_std" in tensors
     ev = evaluate_run(tmp_path, episodes=3)
@@ -89,7 +91,7 @@ def test_the_baseline_fit_on_a_fraction_of_the_batch_keeps_whole_time_steps():
     trainer.iterate()
     obs, returns = trainer.pending_value_fit
     assert obs.shape == (13 * 4, trainer.obs_dim) and returns.shape == (13 * 4,)
-    full = Trainer(TrainConfig(task="Reacher", **TINY))
+    full = Trainer(TrainConfig(task="Reacher", value=ValueFitConfig(fraction=1.0), **TINY))
     full.iterate()
     full_obs, full_returns = full.pending_value_fit
     # The same seed samples the same batch; the fraction keeps time steps 0, 4, ..., 48 of every environment.
@@ -152,7 +154,7 @@ def test_same_seed_gives_the_same_first_iterations():
 
 def test_truncated_steps_bootstrap_from_the_real_final_observation():
     factory = env_factory("Reacher", episode_steps=5)
-    cfg = TrainConfig(task="Reacher", num_envs=2, batch_steps=2, steps=2)
+    cfg = TrainConfig(task="Reacher", num_envs=2, batch_steps=20, steps=20)
     trainer = Trainer(cfg)
     sampler = Sampler([factory, factory], trainer.policy, trainer.normalizer, seed=0)
     batch, episodes = sampler.collect(7)

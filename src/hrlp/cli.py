@@ -17,7 +17,17 @@ from typer.core import TyperGroup
 
 from hrlp import bounds
 from hrlp import cli_params as check
-from hrlp.config import ALGOS, AdvantageConfig, PPOConfig, TrainConfig, TRPOConfig, ValueFitConfig, field_docs
+from hrlp.config import (
+    ALGOS,
+    PAPER_SETTINGS,
+    AdvantageConfig,
+    PPOConfig,
+    TrainConfig,
+    TRPOConfig,
+    ValueFitConfig,
+    auto_workers,
+    field_docs,
+)
 
 console = Console()
 err_console = Console(stderr=True, soft_wrap=True)  # one-line errors, never wrapped
@@ -422,7 +432,7 @@ _CHECKS: dict[str, check.Check] = {  # the bounds checked while the options are 
     "steps": _STEPS_CHECK,
     "batch_steps": _BATCH_CHECK,
     "num_envs": check.count(1, bounds.MAX_NUM_ENVS, bounds.WHY_NUM_ENVS),
-    "workers": check.workers(),
+    "workers": check.workers(0),  # 0: one per core (TrainConfig.resolved)
     "seed": check.seed(),
     "episode_steps": check.count(1),
     "hidden": check.widths,
@@ -526,6 +536,40 @@ _RESUME = Annotated[
 ]
 
 
+def _paper_options() -> dict[str, Any]:
+    """:data:`hrlp.config.PAPER_SETTINGS` by option name (``value.max_iter`` is ``value_iters``)."""
+    records = {name: config for config, name in _NESTED.items()}
+    out = {}
+    for name, value in PAPER_SETTINGS.items():
+        record, _, field = name.rpartition(".")
+        config = records[record] if record else TrainConfig
+        out[next(s.option for s in _SETTINGS if s.config is config and s.field == field)] = value
+    return out
+
+
+_PAPER_OPTIONS = _paper_options()
+"""The options ``--paper-settings`` sets, with their values."""
+
+_PAPER = Annotated[
+    bool,
+    typer.Option(
+        help="The paper's settings, as every preset runs them, for the options among these left out: "
+        + " ".join(f"--{n.replace('_', '-')} {v:g}" for n, v in _PAPER_OPTIONS.items())
+        + " (one process; the defaults sample on every core, with faster updates that learn as well: docs/benchmarks.md)."
+    ),
+]
+
+
+def _apply_paper_settings(ctx: typer.Context) -> set[str]:
+    """With ``--paper-settings``, put the paper's value into ``ctx.params`` for each of :data:`_PAPER_OPTIONS` left out;
+    the names of the options set."""
+    if not ctx.params.get("paper_settings"):
+        return set()
+    left_out = {name for name in _PAPER_OPTIONS if not _given(ctx, name)}
+    ctx.params.update({name: _PAPER_OPTIONS[name] for name in left_out})
+    return left_out
+
+
 @app.command()
 @_settings_options()
 def train(
@@ -537,17 +581,20 @@ def train(
     run_dir: _RUN_DIR = None,
     task_arg: _TASK_ARG = None,
     resume: _RESUME = False,
+    paper_settings: _PAPER = False,
     **settings: Any,
 ) -> None:
     """Train a flat TRPO policy (Box, Discrete or parameterised Tuple actions); logs and checkpoints every iteration.
 
     The options of the run, TRPO and the value baseline are the fields of TrainConfig, TRPOConfig and ValueFitConfig
-    (hrlp.config), with their defaults."""
+    (hrlp.config), with their defaults (--paper-settings: the paper's, where the defaults are faster)."""
+    _apply_paper_settings(ctx)
     if not resume:  # before torch is imported: the task, its arguments and spaces (a resume uses the run's own)
-        note = _episode_length_defaults(ctx, task)
+        notes = [_episode_length_defaults(ctx, task)]
+        notes.append(_small_batch_defaults(ctx))
         _check_numbers(ctx)
         _check_task(task, settings["episode_steps"], task_arg, ctx)
-        if note:  # after the checks: an error stays the one line
+        for note in filter(None, notes):  # after the checks: an error stays the one line
             err_console.print(note, soft_wrap=True, highlight=False)
     _train(ctx, None, run_dir, resume, task_arg)  # short-episode settings, where chosen, are in ctx.params
 
@@ -589,12 +636,15 @@ def train_manager(
     run_dir: _RUN_DIR = None,
     task_arg: _TASK_ARG = None,
     resume: _RESUME = False,
+    paper_settings: _PAPER = False,
     **settings: Any,
 ) -> None:
     """Train a Manager over frozen skills with hierarchical TRPO (Lemma 1's KL); logs and checkpoints every iteration.
 
     The options of the run, TRPO and the value baseline are the fields of TrainConfig, TRPOConfig and ValueFitConfig
-    (hrlp.config), with their defaults (but 5,000 decisions per batch)."""
+    (hrlp.config), with their defaults (but 5,000 decisions per batch; --paper-settings: the paper's, where the
+    defaults are faster)."""
+    _apply_paper_settings(ctx)
     if not resume:  # options the Manager would silently ignore (with --resume they are compared with the run's)
         if ignored := [f"--{n.replace('_', '-')}" for n in ("micro_duration", "micro_penalty", "micro_max_torque")
                        if not micro and _given(ctx, n)]:  # fmt: skip
@@ -603,8 +653,11 @@ def train_manager(
                              f"have: add --micro, or leave {'it' if one else 'them'} out")  # fmt: skip
         if k is not None and not skills.strip():
             raise ValueError("--k sets how long each skill runs, and this Manager has no skills (--skills)")
+        note = _small_batch_defaults(ctx)
         _check_numbers(ctx)  # before torch is imported
         _check_task(task, settings["episode_steps"], task_arg, ctx)
+        if note:
+            err_console.print(note, soft_wrap=True, highlight=False)
     from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 
     try:
@@ -720,12 +773,34 @@ def _episode_length_defaults(ctx: typer.Context, task: str) -> str:
             "options to choose others; docs/training.md)")  # fmt: skip
 
 
+def _small_batch_defaults(ctx: typer.Context) -> str:
+    """For a batch too small for the default ``--fisher-fraction`` or ``--value-fraction`` (fewer than one state in
+    each stride: a few decisions per environment), left out, put 1 (every state) into ``ctx.params`` and return the
+    note that says so ("" when nothing changes). A fraction given on the command line is checked as given."""
+    p = ctx.params
+    if p["batch_steps"] < p["num_envs"]:
+        return ""  # TrainConfig says so in its own words
+    steps_per_env = -(-p["batch_steps"] // p["num_envs"])
+    sizes = {"fisher_fraction": (steps_per_env * p["num_envs"], "decisions"), "value_fraction": (steps_per_env, "time steps")}
+    changed = [name for name, (size, unit) in sizes.items()
+               if not _given(ctx, name) and bounds.fraction_problem(name, p[name], size, unit) is not None]  # fmt: skip
+    if not changed:
+        return ""
+    was = " and ".join(f"--{name.replace('_', '-')} {p[name]:g}" for name in changed)
+    p.update({name: 1.0 for name in changed})
+    now = " ".join(f"--{name.replace('_', '-')} 1" for name in changed)
+    return (f"note: a batch of {steps_per_env * p['num_envs']:,} decisions ({steps_per_env:,} per environment) is too small "
+            f"for the default {was}: every state is used ({now})")  # fmt: skip
+
+
 def _check_numbers(ctx: typer.Context) -> None:
     """The checks of a fresh run's config that combine options (:mod:`hrlp.bounds`, as ``TrainConfig`` makes them), made
     before torch is imported; a single option's bounds were checked while parsing."""
     from hrlp.envs.check import default_episode_steps
 
     p = ctx.params
+    if p["workers"] == 0:
+        auto_workers(p["num_envs"])  # a bad $HRLP_WORKERS fails here, in one line naming it
     if p["batch_steps"] < p["num_envs"]:
         return  # TrainConfig says so in its own words
     steps_per_env = -(-p["batch_steps"] // p["num_envs"])
@@ -770,8 +845,9 @@ def _os_error_line(error: OSError, where: Path) -> str:
 
 
 #: Options of ``train``/``train-manager`` that locate or drive the run rather than define it (not compared on --resume).
-_RUN_OPTIONS = frozenset({"ctx", "run_dir", "resume", "steps", "episodes"})
-"""Options a resume may give freely: where the run is, and its budgets."""
+_RUN_OPTIONS = frozenset({"ctx", "run_dir", "resume", "steps", "episodes", "paper_settings"})
+"""Options a resume may give freely: where the run is, and its budgets (``--paper-settings`` stands for the options it
+sets, compared one by one)."""
 
 
 def _resume_differences(saved: Any, ctx: typer.Context | None) -> list[str]:
@@ -786,7 +862,8 @@ def _resume_differences(saved: Any, ctx: typer.Context | None) -> list[str]:
         source = ctx.get_parameter_source(name)
         return source is not None and source.name not in ("DEFAULT", "DEFAULT_MAP")
 
-    given = [name for name in ctx.params if name not in _RUN_OPTIONS and given_here(name)]
+    from_paper = {name for name in _PAPER_OPTIONS if ctx.params.get("paper_settings") and not given_here(name)}
+    given = [name for name in ctx.params if name not in _RUN_OPTIONS and (given_here(name) or name in from_paper)]
     out = []
     for name in given:
         flag = f"--{name.replace('_', '-')}" if name != "task" else "TASK"
@@ -804,7 +881,7 @@ def _resume_differences(saved: Any, ctx: typer.Context | None) -> list[str]:
             changed = True
         if changed:
             shown = "TASK " + str(value) if name == "task" else f"{flag} {_show(value)}"
-            out.append(f"{shown} (the run: {_show(get(saved))})")
+            out.append(f"{shown} (the run: {_show(get(saved))}{'; from --paper-settings' if name in from_paper else ''})")
     return out
 
 
@@ -899,6 +976,8 @@ def _task_args_accessor() -> tuple[Any, Any]:
 
 
 def _setting_accessor(setting: _Setting) -> tuple[Any, Any]:
+    if (setting.config, setting.field) == (TrainConfig, "workers"):  # 0: the count this machine gives, compared as such
+        return lambda c: c.workers, lambda c, v, p: dataclasses.replace(c, workers=v).resolved()
     if setting.config is TrainConfig:
         return _replace_top(setting.field)
     return _replace_nested(_NESTED[setting.config], setting.field)
@@ -1102,13 +1181,28 @@ def dagger(
     workers: _WORKERS = 2,
     episodes: Annotated[int, typer.Option(help="Evaluation episodes per success rate.", callback=_EPISODES_CHECK)] = 100,
     seed: _SEED = 0,
+    max_hand_distance: Annotated[
+        float | None,
+        typer.Option(
+            help="Keep only hand-overs with d(H, C) at most this, metres (a grip can start there).",
+            callback=check.real(0.0, 10.0, low_open=True),
+        ),
+    ] = None,
+    max_capsule_speed: Annotated[
+        float | None,
+        typer.Option(
+            help="Keep only hand-overs with the capsule slower than this across the table, m/s.",
+            callback=check.real(0.0, 100.0, low_open=True),
+        ),
+    ] = None,
 ) -> None:
     """One DAgger round (Appendix C): collect the states where MANAGER_RUN calls SKILL, retrain the skill from them
     (warm-started), freeze it under a new name with its lineage, retrain the Manager with it, compare old and new."""
     from hrlp.skills.dagger import DaggerConfig, run_round
 
     cfg = DaggerConfig(str(manager_run), skill, name or f"{skill}-dagger", None if library is None else str(library),
-                       states, skill_steps, starts_fraction, manager_steps, workers, episodes, seed)  # fmt: skip
+                       states, skill_steps, starts_fraction, manager_steps, workers, episodes, seed, max_hand_distance,
+                       max_capsule_speed)  # fmt: skip
     res = run_round(cfg, out or manager_run.with_name(manager_run.name + "-dagger"), err_console)  # errors: one line
 
     def cell(d: dict[str, Any]) -> str:

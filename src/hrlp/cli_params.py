@@ -53,9 +53,10 @@ def seed() -> Check:
     return count(0, bounds.MAX_SEED, "seeds are 32-bit")
 
 
-def workers() -> Check:
-    """A number of worker processes: positive, at most :func:`hrlp.bounds.max_processes`."""
-    return count(1, bounds.max_processes, bounds.why_processes)
+def workers(low: int = 1) -> Check:
+    """A number of worker processes: at least ``low`` (0 where it means one per core), at most
+    :func:`hrlp.bounds.max_processes`."""
+    return count(low, bounds.max_processes, bounds.why_processes)
 
 
 def real(low: float | None = None, high: float | None = None, low_open: bool = False, high_open: bool = False) -> Check:

@@ -16,6 +16,7 @@ import functools
 import inspect
 import itertools
 import math
+import os
 import sys
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -25,12 +26,25 @@ from hrlp import bounds
 if TYPE_CHECKING:
     from hrlp.skills.macro_env import MacroSpec
 
-__all__ = ["ALGOS", "AdvantageConfig", "PPOConfig", "TRPOConfig", "TrainConfig", "ValueFitConfig", "field_docs"]
+__all__ = [
+    "ALGOS",
+    "PAPER_SETTINGS",
+    "WORKERS_VARIABLE",
+    "AdvantageConfig",
+    "PPOConfig",
+    "TRPOConfig",
+    "TrainConfig",
+    "ValueFitConfig",
+    "auto_workers",
+    "field_docs",
+    "with_settings",
+]
 
 
 @dataclass(frozen=True)
 class TRPOConfig:
-    """TRPO settings. Defaults: the paper's Appendix D where it states a value, modular_rl's TRPO runs otherwise."""
+    """TRPO settings. Defaults: the paper's Appendix D where it states a value, modular_rl's TRPO runs otherwise, but
+    Fisher-vector products on 10% of the batch (Schulman et al. 2015; the paper's settings: every state)."""
 
     max_kl: float = 0.01
     """Trust-region radius delta: bound on the mean KL(old || new) over the batch's states (Appendix D: 0.01)."""
@@ -49,11 +63,11 @@ class TRPOConfig:
     """Weight of the mean-entropy bonus added to the surrogate (TRPO as published: 0)."""
     normalize_advantages: bool = True
     """Standardise advantages to zero mean and unit variance over the batch before the update (modular_rl does)."""
-    fisher_fraction: float = 1.0
+    fisher_fraction: float = 0.1
     """Share of the batch's states on which the Fisher-vector products of conjugate gradient are estimated
-    (every ``round(1 / fraction)``-th state). Schulman et al. (2015, Section 6) use 10%: the products dominate
-    the update's cost while the gradient, the step length's KL and the line search still use the whole batch.
-    1.0: every state (exact, modular_rl's default)."""
+    (every ``round(1 / fraction)``-th state). Default 0.1, as Schulman et al. (2015, Section 6): the products
+    dominate the update's cost while the gradient, the step length's KL and the line search still use the whole
+    batch. 1.0: every state (exact, modular_rl's and the presets': ``--paper-settings``)."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.max_kl) and self.max_kl > 0):
@@ -137,17 +151,17 @@ ALGOS = ("trpo", "ppo")
 class ValueFitConfig:
     """Settings of the L-BFGS value fit."""
 
-    max_iter: int = 25
-    """L-BFGS iterations per fit (modular_rl: 25)."""
+    max_iter: int = 10
+    """L-BFGS iterations per fit (default 10; modular_rl and the presets: 25, ``--paper-settings``)."""
     l2_coef: float = 1e-3
     """Weight of the L2 penalty ``sum_w ||w||^2`` over all value-net parameters (modular_rl: 1e-3)."""
     history_size: int = 10
     """Number of curvature pairs L-BFGS keeps (scipy's L-BFGS-B default, as in modular_rl)."""
-    fraction: float = 1.0
+    fraction: float = 0.25
     """Share of the batch's time steps the trainer fits on (every ``round(1 / fraction)``-th step of every
-    environment). The fit is the costliest part of a flat iteration after sampling, and a baseline needs fewer
-    samples than the policy step: consecutive states of one episode carry nearly the same targets. 1.0: every
-    state (modular_rl)."""
+    environment; default 0.25). The fit is the costliest part of a flat iteration after sampling, and a baseline needs
+    fewer samples than the policy step: consecutive states of one episode carry nearly the same targets. 1.0: every
+    state (modular_rl and the presets, ``--paper-settings``)."""
 
     def __post_init__(self) -> None:
         if self.max_iter < 1:
@@ -162,7 +176,10 @@ class ValueFitConfig:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Settings of a training run, flat or Manager (defaults from the paper's Appendix D: TRPO)."""
+    """Settings of a training run, flat or Manager: the paper's (Appendix D: TRPO) where they decide what is learned,
+    faster ones where docs/benchmarks.md shows that they learn as well (sampling workers, 64 environments, Fisher-vector
+    products on 10% of the batch, a shorter baseline fit on a quarter of it); :data:`PAPER_SETTINGS` gives back the
+    paper's, as every preset runs them."""
 
     task: str
     """An hrlp task name (``hrlp tasks``) or a Gymnasium id, e.g. Pusher-v5."""
@@ -170,10 +187,12 @@ class TrainConfig:
     """Low-level environment steps in total (a Manager's macro-action of tau steps counts tau)."""
     batch_steps: int = 50_000
     """Decisions per TRPO iteration (the paper: 50,000 for flat runs, 5,000 for Managers)."""
-    num_envs: int = 16
-    """Environments stepped together with batched inference."""
-    workers: int = 1
-    """Processes that sample at the same time, each stepping its share of the environments (1: in this process)."""
+    num_envs: int = 64
+    """Environments stepped together with batched inference (default 64; the paper's settings, 16)."""
+    workers: int = 0
+    """Processes that sample at the same time, each stepping its share of the environments. Default 0: one per CPU core
+    this process may use (or $HRLP_WORKERS), at most num_envs; 1: in this process (the paper's settings). A run records
+    the number it used, and a resume keeps it."""
     seed: int = 0
     """Seed of the environments, the network initialisation and the action noise."""
     episode_steps: int | None = None
@@ -207,10 +226,12 @@ class TrainConfig:
     success and evaluation (``hrlp eval``) stay in the task's own units."""
 
     def __post_init__(self) -> None:
-        for name in ("steps", "batch_steps", "num_envs", "workers"):
+        for name in ("steps", "batch_steps", "num_envs"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 0:
+            raise ValueError(f"workers must be a positive integer (or 0: one per core), got {self.workers!r}")
         if self.workers > self.num_envs:
             raise ValueError(f"workers ({self.workers}) must be at most num_envs ({self.num_envs})")
         if self.batch_steps < self.num_envs:
@@ -263,6 +284,13 @@ class TrainConfig:
         if problem := next((p for p in problems if p is not None), None):
             raise ValueError(problem)
 
+    def resolved(self) -> TrainConfig:
+        """This config with a concrete number of sampling workers: ``workers`` 0 becomes :func:`auto_workers`'s count
+        for ``num_envs``; any other config is returned as it is. What a run records and resumes with."""
+        if self.workers != 0:
+            return self
+        return dataclasses.replace(self, workers=auto_workers(self.num_envs))
+
     @property
     def steps_per_env(self) -> int:
         """Decisions each environment takes per iteration."""
@@ -280,13 +308,18 @@ class TrainConfig:
         for name in ("trpo", "value", "advantage", "ppo"):
             if name in d and not isinstance(d[name], dict):
                 raise TypeError(f"{name} must be a mapping of settings, got {type(d[name]).__name__}")
-        trpo = dict(d["trpo"])
+        trpo, value = dict(d["trpo"]), dict(d["value"])
         # Configs saved before the advantage settings had their own record kept them in TRPO's.
         moved = {k: trpo.pop(k) for k in ("gamma", "gae_lambda") if k in trpo}
+        # A setting of PAPER_SETTINGS that a config lacks was saved before the setting existed, and ran with the paper's
+        # value, the default until then (the shipped skills' configs have no fisher_fraction nor value fraction).
+        for name, v in PAPER_SETTINGS.items():
+            record, _, key = name.rpartition(".")
+            {"": d, "trpo": trpo, "value": value}[record].setdefault(key, v)
         d["advantage"] = AdvantageConfig(**{**moved, **d.get("advantage", {})})
         d["trpo"] = TRPOConfig(**trpo)
         d["ppo"] = PPOConfig(**d.get("ppo", {}))
-        d["value"] = ValueFitConfig(**d["value"])
+        d["value"] = ValueFitConfig(**value)
         if d.get("macro"):
             from hrlp.skills.macro_env import MacroSpec  # imports gymnasium and the skills: only for a Manager's config
 
@@ -294,6 +327,59 @@ class TrainConfig:
         else:
             d["macro"] = None
         return cls(**d)
+
+
+WORKERS_VARIABLE = "HRLP_WORKERS"
+"""The environment variable that sets the number of sampling workers a run with ``workers`` 0 (the default) uses."""
+
+
+def auto_workers(num_envs: int) -> int:
+    """The sampling workers of a run with ``workers`` 0 and ``num_envs`` environments: ``$HRLP_WORKERS`` if set, else
+    one per CPU core this process may use (:func:`hrlp.bounds.cores`), at most ``num_envs``. Raises ValueError, naming
+    the variable, for a value that is not a positive integer within :func:`hrlp.bounds.max_processes`."""
+    raw = os.environ.get(WORKERS_VARIABLE, "").strip()
+    if not raw:
+        return max(1, min(bounds.cores(), num_envs))
+    what = f"{WORKERS_VARIABLE} (the sampling workers of a run whose workers are left out)"
+    try:
+        count = int(raw)
+    except ValueError:
+        raise ValueError(f"{what} must be a positive integer, got {raw!r}") from None
+    if (problem := bounds.count_problem(count, 1, bounds.max_processes(), bounds.why_processes())) is not None:
+        raise ValueError(f"{what} {problem}")
+    return min(count, num_envs)
+
+
+PAPER_SETTINGS: dict[str, Any] = {
+    "workers": 1,
+    "num_envs": 16,
+    "trpo.fisher_fraction": 1.0,
+    "value.max_iter": 25,
+    "value.fraction": 1.0,
+}
+"""The settings the paper's runs and every preset use where :class:`TrainConfig`'s defaults are faster: one process
+and 16 environments, exact Fisher-vector products, the baseline fitted by modular_rl's 25 L-BFGS iterations on every
+state. Names are those of :meth:`TrainConfig.to_json`, nested ones dotted (``trpo.fisher_fraction``); apply them with
+:func:`with_settings`. ``hrlp train --paper-settings`` sets the options they name that are left out."""
+
+
+def with_settings(config: TrainConfig, settings: dict[str, Any]) -> TrainConfig:
+    """``config`` with each of ``settings`` replaced: a :class:`TrainConfig` field by its name, a field of a nested
+    record (``trpo``, ``value``, ``advantage``, ``ppo``) as ``record.field``. Raises ValueError for an unknown name."""
+    nested = {"advantage", "trpo", "ppo", "value"}
+    top: dict[str, Any] = {}
+    inner: dict[str, dict[str, Any]] = {}
+    for name, value in settings.items():
+        record, dot, field_name = name.partition(".")
+        if dot and record in nested and field_name in {f.name for f in dataclasses.fields(getattr(config, record))}:
+            inner.setdefault(record, {})[field_name] = value
+        elif not dot and name in {f.name for f in dataclasses.fields(TrainConfig)} and name not in nested:
+            top[name] = value
+        else:
+            raise ValueError(f"unknown setting {name!r}: use a TrainConfig field or {', '.join(sorted(nested))}.<field>")
+    for record, values in inner.items():
+        top[record] = dataclasses.replace(getattr(config, record), **values)
+    return dataclasses.replace(config, **top)
 
 
 @functools.cache

@@ -2,7 +2,12 @@
 
 Per-observation policy calls, not physics, are what make RL libraries slow on small networks
 (shared/PERFORMANCE.md), so the sampler keeps ``N`` environments in one process and asks the
-policy for ``N`` actions at once. Time is accounted per phase (environment, inference) so a
+policy for ``N`` actions at once. It sees them only as a :class:`~hrlp.envs.vector.VectorEnv`
+(one step record, same-step autoreset): ordinary Gymnasium environments (:class:`~hrlp.envs.vector.SerialVectorEnv`),
+a Manager's macro-action environments (:class:`~hrlp.skills.macro_env.MacroVectorEnv`, batched skill
+inference) or a batched physics backend (:class:`~hrlp.envs.batched.BatchedArmEnv`) go through the same
+loop, and every batch carries the per-decision discount (gamma for a flat step, gamma^tau for a
+macro-action of tau low-level steps). Time is accounted per phase (environment, inference) so a
 training run can report where its wall time goes.
 """
 
@@ -21,10 +26,14 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from hrlp.envs.check import parameterised_dims
-from hrlp.policies.distributions import flat_to_tuples
+from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorEnv, VectorStep
+from hrlp.envs.vector import action_decoder as action_decoder  # re-exported: its home is hrlp.envs.vector
 from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
+from hrlp.skills.macro_env import MacroEnv, MacroVectorEnv
+
+DEFAULT_GAMMA = 0.99
+"""The discount of a flat step when none is given (:class:`hrlp.config.AdvantageConfig`'s default)."""
 
 
 class NonFiniteError(ValueError):
@@ -55,7 +64,7 @@ class Batch:
     rewards: torch.Tensor  # [T, N]
     terminated: torch.Tensor  # [T, N] bool: the MDP ended (no bootstrap)
     truncated: torch.Tensor  # [T, N] bool: cut by a time limit or fault (bootstrap from next_obs)
-    discount: torch.Tensor | None = None  # [T, N] gamma^tau per decision (macro-actions); None: gamma every step
+    discount: torch.Tensor  # [T, N] gamma^tau per decision (gamma for a flat step, tau = 1)
     env_steps: int = 0  # low-level environment steps (T * N for flat policies, the sum of the taus for a Manager)
 
     @property
@@ -91,17 +100,41 @@ class Timing:
     not report it (``physics_seconds``: hrlp's tasks and the Manager's view of them do, Gymnasium's do not)."""
 
 
+def vector_env(envs: Sequence[gym.Env], gamma: float | None = None) -> VectorEnv:
+    """The :class:`~hrlp.envs.vector.VectorEnv` that steps ``envs`` together: a
+    :class:`~hrlp.skills.macro_env.MacroVectorEnv` for a Manager's :class:`~hrlp.skills.macro_env.MacroEnv`s (their own
+    gamma; a different ``gamma`` is refused, since it would discount the decisions otherwise than inside them), else a
+    :class:`~hrlp.envs.vector.SerialVectorEnv` with ``gamma`` per step (default :data:`DEFAULT_GAMMA`)."""
+    macro = [isinstance(env, MacroEnv) for env in envs]
+    if any(macro):
+        if not all(macro):
+            raise ValueError("vector_env: the environments mix MacroEnvs and other environments")
+        vec = MacroVectorEnv(envs)  # type: ignore[arg-type]
+        if gamma is not None and gamma != vec.gamma:
+            raise ValueError(f"vector_env: gamma {gamma} differs from the MacroEnvs' own ({vec.gamma})")
+        return vec
+    return SerialVectorEnv(envs, DEFAULT_GAMMA if gamma is None else gamma)
+
+
 class Sampler:
-    """Steps ``N`` environments with batched policy inference.
+    """Steps ``N`` environments with batched policy inference, through one :class:`~hrlp.envs.vector.VectorEnv`.
 
     Args:
-        env_fns: one constructor per environment.
+        env_fns: one constructor per environment (stepped by :func:`vector_env`), or a ready VectorEnv (e.g. a
+            :class:`~hrlp.envs.batched.BatchedArmEnv`), which the sampler then owns.
         policy: the policy; called once per step on ``[N, obs_dim]``.
         normalizer: observation normaliser. Its statistics stay fixed during a batch, so the policy and the value
             baseline see every observation of the batch normalised alike; they are updated with the batch's raw
             observations at its end (unless frozen).
         seed: environment ``i`` is reset first with ``seed + i``; actions use a torch generator seeded with ``seed``.
         first_index: the index of the first environment in error messages (a sampling worker's share starts there).
+        gamma: the discount of a flat step (``Batch.discount``); None: :data:`DEFAULT_GAMMA`. MacroEnvs and a ready
+            VectorEnv discount with their own.
+
+    One loop for every kind of environment: a step's rewards, discounts (gamma^tau), flags and observations come
+    from :class:`~hrlp.envs.vector.VectorStep`; episode returns count the task's undiscounted rewards
+    (``infos['task_reward']`` where the environment reports it, as a Manager's does, else the rewards), lengths the
+    low-level steps (the sum of the taus), and ``Batch.env_steps`` the taus of the batch.
 
     Every observation (at reset and after each step), reward and action is checked for NaN and inf as it enters;
     the first non-finite one raises :class:`NonFiniteError` naming the environment, the step and the field, before
@@ -110,23 +143,24 @@ class Sampler:
 
     def __init__(
         self,
-        env_fns: Sequence[Callable[[], gym.Env]],
+        env_fns: Sequence[Callable[[], gym.Env]] | VectorEnv,
         policy: Policy,
         normalizer: RunningNormalizer,
         seed: int = 0,
         first_index: int = 0,
+        gamma: float | None = None,
     ) -> None:
-        if not env_fns:
+        if isinstance(env_fns, VectorEnv):
+            self.vector_env: VectorEnv = env_fns
+        elif not env_fns:
             raise ValueError("Sampler needs at least one environment")
-        self.envs = [fn() for fn in env_fns]
+        else:
+            self.vector_env = vector_env([fn() for fn in env_fns], gamma)
         self.policy = policy
         self.normalizer = normalizer
-        self._decode = action_decoder(self.envs[0].action_space)
-        # Environments that step together (the Manager's MacroEnv: batched skill inference) provide step_batch.
-        self._step_batch = getattr(type(self.envs[0]), "step_batch", None)
         self.generator = torch.Generator().manual_seed(seed)
-        self._obs = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(self.envs)]).astype(np.float64)
-        n = len(self.envs)
+        self._obs = np.asarray(self.vector_env.reset(seed=seed), dtype=np.float64).copy()
+        n = self.num_envs
         self._ret = np.zeros(n)
         self._len = np.zeros(n, dtype=np.int64)
         self.timing = Timing()
@@ -137,7 +171,7 @@ class Sampler:
     @property
     def num_envs(self) -> int:
         """N, the number of environments."""
-        return len(self.envs)
+        return self.vector_env.num_envs
 
     def request(self, steps_per_env: int) -> None:
         """Ask for a batch of ``steps_per_env`` steps per environment; :meth:`receive` samples and returns it.
@@ -158,15 +192,14 @@ class Sampler:
         obs_buf = np.empty((steps_per_env, n, dim))
         next_buf = np.empty((steps_per_env, n, dim))
         rewards = np.empty((steps_per_env, n))
+        discount = np.empty((steps_per_env, n))
         terminated = np.zeros((steps_per_env, n), dtype=bool)
         truncated = np.zeros((steps_per_env, n), dtype=bool)
-        discount = np.empty((steps_per_env, n)) if self._step_batch is not None else None
         actions_buf: np.ndarray | None = None
         episodes: list[Episode] = []
-        next_raw = np.empty((n, dim))
         raw_buf = np.empty((steps_per_env, n, dim))
         env_steps = 0
-        physics0 = physics_seconds(self.envs)
+        physics = 0.0
         act = self.policy.numpy_actor()  # the weights stay fixed during a batch
         if not np.isfinite(self._obs).all():  # a reset's (or a restored state's) observation
             self._non_finite(-1, {"observation": self._obs}, None)
@@ -175,52 +208,36 @@ class Sampler:
             raw_buf[t] = self._obs
             obs_buf[t] = self.normalizer.normalize(self._obs)
             actions = act(obs_buf[t].astype(np.float32), self.generator)
+            rows = actions.reshape(n, -1)  # flat rows (a Discrete action is one number)
             if not np.isfinite(actions).all():
-                self._non_finite(t, {"action": actions.reshape(n, -1)}, self._len + 1)
-            episode_steps = self._len + 1  # per environment, the step of its episode taken now (a Manager's: its first)
+                self._non_finite(t, {"action": rows}, self._len + 1)
             if actions_buf is None:
                 actions_buf = np.empty((steps_per_env, *actions.shape))
             actions_buf[t] = actions
             t1 = time.perf_counter()
-            if self._step_batch is not None:
-                res = self._step_batch(self.envs, actions)
-                assert discount is not None
-                rewards[t], discount[t], next_raw[:] = res.rewards, res.discount, res.obs
-                episode_steps = self._len + res.tau  # a macro-action's last low-level step
-                self._ret += res.task_reward
-                self._len += res.tau
-                env_steps += int(res.tau.sum())
-                terminated[t], truncated[t] = res.terminated, res.truncated
-                self._obs[:] = res.obs
-                for i in np.flatnonzero(res.terminated | res.truncated):
-                    episodes.append(self._finish(i, res.infos[i]))
-                    self._obs[i] = self.envs[i].reset()[0]
-            else:
-                decoded = self._decode(actions)
-                for i, env in enumerate(self.envs):
-                    obs, r, term, trunc, info = env.step(decoded[i])
-                    rewards[t, i] = r
-                    next_raw[i] = obs
-                    self._ret[i] += r
-                    self._len[i] += 1
-                    if term or trunc:
-                        terminated[t, i], truncated[t, i] = term, (trunc and not term)
-                        episodes.append(self._finish(i, info))
-                        obs, _ = env.reset()
-                    self._obs[i] = obs
-                env_steps += n
+            step = self.vector_env.step(rows)
             t2 = time.perf_counter()
+            episode_steps = self._len + step.tau  # per environment, the step of its episode taken last
+            rewards[t], discount[t] = step.rewards, step.discount
+            terminated[t], truncated[t] = step.terminated, step.truncated
+            self._ret += step.infos.get("task_reward", step.rewards)
+            self._len += step.tau
+            env_steps += int(step.tau.sum())
+            physics += step.physics_seconds
+            for i in np.flatnonzero(step.done):
+                episodes.append(self._finish(int(i), step))
+            self._obs[:] = step.obs
             # A few microseconds per step for all environments: every number that enters training is finite.
             # (A reward beyond float32's range is finite here but infinite in the float32 batch: it counts as non-finite.)
             ok_rewards = np.abs(rewards[t]).max() <= FLOAT32_MAX  # False for NaN too
-            if not (ok_rewards and np.isfinite(next_raw).all() and np.isfinite(self._obs).all()):
-                self._non_finite(t, {"reward": rewards[t], "observation": next_raw, "reset observation": self._obs},
+            if not (ok_rewards and np.isfinite(step.next_obs).all() and np.isfinite(self._obs).all()):
+                self._non_finite(t, {"reward": rewards[t], "observation": step.next_obs, "reset observation": self._obs},
                                  episode_steps)  # fmt: skip
-            next_buf[t] = self.normalizer.normalize(next_raw)
+            next_buf[t] = self.normalizer.normalize(step.next_obs)
             self.timing.inference += t1 - t0
             self.timing.env += t2 - t1
         assert actions_buf is not None
-        self.timing.physics += physics_seconds(self.envs) - physics0
+        self.timing.physics += physics
         self.last_raw_obs = raw_buf
         if not self.normalizer.frozen:
             self.normalizer.update(raw_buf.reshape(-1, dim))
@@ -232,7 +249,7 @@ class Sampler:
             rewards=torch.as_tensor(rewards, dtype=f32),
             terminated=torch.as_tensor(terminated),
             truncated=torch.as_tensor(truncated),
-            discount=None if discount is None else torch.as_tensor(discount, dtype=f32),
+            discount=torch.as_tensor(discount, dtype=f32),
             env_steps=env_steps,
         )
         return batch, episodes
@@ -240,7 +257,7 @@ class Sampler:
     @property
     def resumable(self) -> bool:
         """Whether every environment can save and restore its exact state (hrlp tasks can; most Gymnasium ids not)."""
-        return all(hasattr(env.unwrapped, "get_state") for env in self.envs)
+        return self.vector_env.resumable
 
     def get_state(self) -> dict:
         """The sampler's progress (JSON): current observations, running returns, and each environment's exact state."""
@@ -248,7 +265,7 @@ class Sampler:
             "obs": self._obs.tolist(),
             "ret": self._ret.tolist(),
             "len": self._len.tolist(),
-            "envs": [env.unwrapped.get_state() for env in self.envs] if self.resumable else None,
+            "envs": self.vector_env.get_state()["envs"] if self.resumable else None,
         }
 
     def set_state(self, state: dict) -> None:
@@ -257,8 +274,7 @@ class Sampler:
             return
         if len(state["envs"]) != self.num_envs:
             raise ValueError(f"saved sampler has {len(state['envs'])} environments, this one {self.num_envs}")
-        for env, env_state in zip(self.envs, state["envs"], strict=True):
-            env.unwrapped.set_state(env_state)
+        self.vector_env.set_state({"envs": state["envs"], "obs": state["obs"]})
         self._obs[:] = state["obs"]
         self._ret[:] = state["ret"]
         self._len[:] = state["len"]
@@ -287,14 +303,15 @@ class Sampler:
                                  "stopped before it entered the normaliser, the networks or a checkpoint")  # fmt: skip
         raise AssertionError("_non_finite called with finite values")  # pragma: no cover
 
-    def _finish(self, i: int, info: dict) -> Episode:
-        success = info.get("success")
-        tds = info.get("target_dist_sum")
+    def _finish(self, i: int, step: VectorStep) -> Episode:
+        """Environment ``i``'s episode, ended at ``step``; its running return and length start again."""
+        no_test = step.infos.get(NO_SUCCESS_TEST)
+        tds = step.infos.get("target_dist_sum")
         ep = Episode(
             ret=float(self._ret[i]),
             length=int(self._len[i]),
-            success=None if success is None else bool(success),
-            target_dist_sum=None if tds is None else float(tds),
+            success=None if no_test is not None and no_test[i] else bool(step.success[i]),
+            target_dist_sum=None if tds is None or math.isnan(tds[i]) else float(tds[i]),
         )
         self._ret[i] = 0.0
         self._len[i] = 0
@@ -302,8 +319,7 @@ class Sampler:
 
     def close(self) -> None:
         """Close every environment."""
-        for env in self.envs:
-            env.close()
+        self.vector_env.close()
 
 
 class ParallelSampler:
@@ -315,13 +331,14 @@ class ParallelSampler:
     in this process with every raw observation, as :class:`Sampler` does. Worker ``w`` seeds its environments
     like :class:`Sampler` would (``seed + i`` for environment ``i``) and its action noise with ``seed + 7919 w``,
     so a run is reproducible for a given number of workers, and :meth:`get_state`/:meth:`set_state` make it
-    exactly resumable. Environment constructors must be picklable (``hrlp.train.env_factory``'s are).
+    exactly resumable. Environment constructors must be picklable (``hrlp.train.env_factory``'s are); ``gamma`` is
+    :class:`Sampler`'s.
     """
 
     generator = None  # the action-noise generators live in the workers (their states are in get_state())
 
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], policy: Policy, normalizer: RunningNormalizer,
-                 seed: int = 0, workers: int = 2) -> None:  # fmt: skip
+                 seed: int = 0, workers: int = 2, gamma: float | None = None) -> None:  # fmt: skip
         import multiprocessing as mp
 
         if workers < 2 or workers > len(env_fns):
@@ -337,7 +354,7 @@ class ParallelSampler:
             parent, child = ctx.Pipe()
             chunk = list(env_fns[bounds[w] : bounds[w + 1]])
             args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w, int(bounds[w]),
-                    os.getpid())  # fmt: skip
+                    os.getpid(), gamma)  # fmt: skip
             proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
             proc.start()
             child.close()
@@ -371,9 +388,8 @@ class ParallelSampler:
             raise RuntimeError("receive() without a request()")
         self._pending = False
         parts = [_receive(conn) for conn in self._conns]
-        fields = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated")
+        fields = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated", "discount")
         joined = {f: torch.cat([p["batch"][f] for p in parts], dim=1) for f in fields}
-        discounts = [p["batch"]["discount"] for p in parts]
         raw = np.concatenate([p["raw"] for p in parts], axis=1)
         self.last_raw_obs = raw
         if not self.normalizer.frozen:
@@ -381,8 +397,7 @@ class ParallelSampler:
         self.timing.env += max(p["env"] for p in parts)
         self.timing.inference += max(p["inference"] for p in parts)
         self.timing.physics += sum(p["physics"] for p in parts)
-        batch = Batch(**joined, discount=None if discounts[0] is None else torch.cat(discounts, dim=1),
-                      env_steps=sum(p["batch"]["env_steps"] for p in parts))  # fmt: skip
+        batch = Batch(**joined, env_steps=sum(p["batch"]["env_steps"] for p in parts))
         return batch, [e for p in parts for e in p["episodes"]]
 
     def get_state(self) -> dict:
@@ -442,7 +457,7 @@ def _die_with_parent(parent_pid: int) -> None:
 
 
 def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict, env_seed: int, noise_seed: int,
-                    first_index: int = 0, parent_pid: int | None = None) -> None:  # fmt: skip
+                    first_index: int = 0, parent_pid: int | None = None, gamma: float | None = None) -> None:  # fmt: skip
     """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests.
 
     It dies with its parent (:func:`_die_with_parent`) and ends quietly when the parent's end of the pipe closes."""
@@ -451,7 +466,7 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
     torch.set_num_threads(1)
     try:
         normalizer = RunningNormalizer.from_config({**norm_config, "frozen": True})
-        sampler = Sampler(env_fns, policy, normalizer, seed=env_seed, first_index=first_index)
+        sampler = Sampler(env_fns, policy, normalizer, seed=env_seed, first_index=first_index, gamma=gamma)
         sampler.generator.manual_seed(noise_seed)
         conn.send(("ok", None))
     except Exception as e:  # reported to the parent, which raises it
@@ -494,39 +509,6 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
             conn.send(("non-finite", str(e)))
         except Exception as e:  # reported to the parent, which raises it
             conn.send(("error", f"{type(e).__name__}: {e}"))
-
-
-def physics_seconds(envs: Sequence[gym.Env]) -> float:
-    """CPU seconds ``envs`` have spent inside ``mj_step`` so far, summed; NaN if any of them does not report it."""
-    total = 0.0
-    for env in envs:
-        seconds = getattr(env.unwrapped, "physics_seconds", None)
-        if seconds is None:
-            return math.nan
-        total += seconds
-    return total
-
-
-def action_decoder(space: gym.Space) -> Callable[[np.ndarray], Sequence]:
-    """How the policy's batched actions ``[N, ...]`` become ``N`` environment actions for ``space``.
-
-    Box: clipped to the bounds. Discrete: integers. ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` (a parameterised
-    action space): ``(k, u_1, ..., u_n)`` tuples with each block clipped to its bounds. Other spaces raise ValueError.
-    """
-    if isinstance(space, gym.spaces.Box):
-        low, high = space.low, space.high
-        return lambda a: np.clip(a, low, high)
-    if isinstance(space, gym.spaces.Discrete):
-        start = int(space.start)
-        return lambda a: (a.reshape(-1).astype(np.int64) + start).tolist()
-    dims = parameterised_dims(space)
-    blocks = space.spaces[1:]
-
-    def decode(a: np.ndarray) -> list[tuple]:
-        return [(k, *(np.clip(u, b.low, b.high) for u, b in zip(us, blocks, strict=True)))
-                for k, *us in flat_to_tuples(a, dims)]  # fmt: skip
-
-    return decode
 
 
 def mean_or_nan(values: Sequence[float | None]) -> float:

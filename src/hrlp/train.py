@@ -2,8 +2,8 @@
 
 Flat policies (any hrlp task, any Gymnasium id with a Box, Discrete or parameterised
 ``Tuple(Discrete(n), Box, ...)`` action space) and Managers (an hrlp task wrapped in a
-:class:`~hrlp.skills.macro_env.MacroEnv` of frozen skills) go through the same loop; the
-Manager's batch carries the per-decision discount gamma^tau that GAE applies.
+:class:`~hrlp.skills.macro_env.MacroEnv` of frozen skills) go through the same loop; every batch
+carries the per-decision discount GAE applies (gamma for a flat step, gamma^tau for a Manager's decision).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import os
 import time
 import warnings
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -126,11 +126,12 @@ class Trainer:
 
     With ``cfg.workers > 1`` this process computes with one torch thread while the workers sample (the baseline fit
     runs then, and more threads would only compete with them for the cores), and with one thread per worker (at most
-    one per core) for the TRPO step, while the workers wait for the next batch's weights.
+    one per core) for the TRPO step, while the workers wait for the next batch's weights. A config whose ``workers``
+    is 0 (the default) is run with the count :meth:`TrainConfig.resolved` gives, which ``self.cfg`` records.
     """
 
     def __init__(self, cfg: TrainConfig) -> None:
-        self.cfg = cfg
+        self.cfg = cfg = cfg.resolved()
         factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **cfg.task_kwargs)
         torch.manual_seed(cfg.seed)
         probe = factory()
@@ -153,9 +154,10 @@ class Trainer:
             # (fewer steps/s with the demo's Manager on two cores); during the TRPO step they wait, and the cores are free.
             self._update_threads = max(1, min(cfg.workers, os.cpu_count() or 1))
             torch.set_num_threads(1)
-            self.sampler = ParallelSampler(envs, self.policy, self.normalizer, seed=cfg.seed, workers=cfg.workers)
+            self.sampler = ParallelSampler(envs, self.policy, self.normalizer, seed=cfg.seed, workers=cfg.workers,
+                                           gamma=cfg.advantage.gamma)  # fmt: skip
         else:
-            self.sampler = Sampler(envs, self.policy, self.normalizer, seed=cfg.seed)
+            self.sampler = Sampler(envs, self.policy, self.normalizer, seed=cfg.seed, gamma=cfg.advantage.gamma)
         self.update = make_update(cfg, self.policy)
         """The policy step (TRPO or PPO, ``cfg.algo``)."""
         self.iteration = 0
@@ -591,7 +593,8 @@ def train(
     """Train, yielding each iteration's statistics; writes logs, a checkpoint per iteration, and ``config.json``.
 
     With ``resume``, continue from ``run_dir/checkpoint`` (its config must equal ``cfg`` except the budgets ``steps``
-    and ``episodes``, which may grow; a difference raises ValueError naming every differing setting); log rows written
+    and ``episodes``, which may grow, and ``workers`` 0 in ``cfg``, which takes the run's own count; a difference raises
+    ValueError naming every differing setting); log rows written
     after that checkpoint are dropped so the log matches the restored state. Without it, a directory that holds a
     checkpoint -- or only the ``.old`` copy a kill between a save's renames leaves
     (:func:`hrlp.checkpoint.checkpoint_exists`) -- is refused.
@@ -619,9 +622,12 @@ def train(
             if checkpoint_exists(checkpoint):
                 raise ValueError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
             trainer = Trainer(cfg)
+            cfg = trainer.cfg  # with the number of workers it uses: config.json and the checkpoint record it
         logger: RunLogger | None = None
         try:  # from here on, whatever fails, the sampler (and its worker processes) is closed
             if resume:
+                if cfg.workers == 0:  # left to the machine: the run continues with the count it was trained with
+                    cfg = replace(cfg, workers=trainer.cfg.workers)
                 differences = config_differences(trainer.cfg, cfg, ignore=("steps", "episodes"))
                 if differences:
                     raise ValueError(f"{run_dir}: --resume needs the run's own settings (only --steps and --episodes "

@@ -29,7 +29,7 @@ LEFT_OUT = {(TrainConfig, name) for name in ("task", "advantage", "trpo", "ppo",
 """The fields that are not generated options (cli._LEFT_OUT says why)."""
 VALUE_FLAGS = {"max_iter": "--value-iters", "fraction": "--value-fraction", "l2_coef": "--value-l2-coef",
                "history_size": "--value-history-size"}  # fmt: skip
-_SHARED_OWN = {"task", "run_dir", "task_arg", "resume", "help"}
+_SHARED_OWN = {"task", "run_dir", "task_arg", "resume", "paper_settings", "help"}
 _MANAGER_OWN = {"skills", "micro", "micro_duration", "micro_penalty", "micro_max_torque", "k", "library", "handover"}
 OWN = {"train": _SHARED_OWN, "train-manager": _SHARED_OWN | _MANAGER_OWN}
 """Each command's own parameters, beside the generated ones."""

@@ -291,7 +291,7 @@ def test_bad_actions_give_one_line_errors_naming_the_problem(backend):
         ({"n": 2, "backend": "gpu"}, "backend must be one of rollout, loop"),
         ({"n": 2, "threads": 0}, "threads must be a positive integer"),
         ({"n": 2, "backend": "loop", "threads": 2}, "threads must be 1"),
-        ({"n": 2, "gamma": 1.5}, r"gamma must be a number in \(0, 1\]"),
+        ({"n": 2, "gamma": 1.5}, r"gamma must be a number in \[0, 1\]"),
         ({"n": 2, "episode_steps": 0}, "episode_steps must be a positive integer"),
         ({"n": 2, "bogus": 1}, "unknown argument"),
     ],

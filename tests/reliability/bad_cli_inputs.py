@@ -209,6 +209,10 @@ CASES: tuple[BadInput, ...] = (
     _c("dagger-states-zero", "dagger {run} --states 0", r"--states must be a positive integer", "clean"),
     _c("dagger-starts-fraction-beyond-1", "dagger {run} --starts-fraction 2", r"--starts-fraction must be in \(0, 1\]",
        "clean"),
+    _c("dagger-max-hand-distance-zero", "dagger {run} --max-hand-distance 0", r"--max-hand-distance must be in \(0, 10\]",
+       "clean"),
+    _c("dagger-max-capsule-speed-nan", "dagger {run} --max-capsule-speed nan",
+       r"--max-capsule-speed must be a finite number", "clean"),
     # --- skills build (its options checked while parsed) and the command itself ----------------------------------------
     _c("skills-build-workers-too-many", "skills build --library {tmp}/lib --out {tmp}/o --only gripper --budget 16 "
        "--workers {too_many}", r"--workers must be at most", "silent"),

@@ -10,7 +10,7 @@ from hrlp.cli import app
 from hrlp.envs import make
 from hrlp.envs.tasks import start_bank
 from hrlp.skills import SkillLibrary, load_skill
-from hrlp.skills.dagger import DaggerConfig, collect_handover_states, run_round
+from hrlp.skills.dagger import DaggerConfig, collect_handover_states, graspable, run_round
 from hrlp.skills.macro_env import Handover, MacroSpec
 from hrlp.skills.starts import write_start_bank
 from hrlp.train import TrainConfig, Trainer, train
@@ -26,7 +26,8 @@ def manager_run(tmp_path_factory):
 
 
 def test_collected_states_are_where_the_manager_chose_the_skill_and_gripper_episodes_start_there(manager_run, tmp_path):
-    qpos, qvel, episodes = collect_handover_states(manager_run, "gripper", 12, seed=1)
+    qpos, qvel, episodes, refused = collect_handover_states(manager_run, "gripper", 12, seed=1)
+    assert refused == 0
     assert qpos.shape == (12, 16) and qvel.shape == (12, 15) and episodes >= 1 and np.isfinite(qpos).all()
     again = collect_handover_states(manager_run, "gripper", 12, seed=1)
     np.testing.assert_array_equal(again[0], qpos)  # the collection is reproducible from its seed
@@ -38,6 +39,29 @@ def test_collected_states_are_where_the_manager_chose_the_skill_and_gripper_epis
         assert np.abs(qpos.astype(np.float32) - d.qpos.astype(np.float32)).max(axis=1).min() < 1e-6
     with pytest.raises(ValueError, match="no skill 'mover'"):
         collect_handover_states(manager_run, "mover", 5)
+
+
+def test_the_graspable_filter_keeps_only_close_states_with_the_capsule_at_rest(manager_run):
+    env = make("Gripper")
+    env.reset(seed=0)
+    physics = env.unwrapped.physics
+    everything = collect_handover_states(manager_run, "gripper", 30, seed=2)
+    d = []
+    for q, v in zip(everything[0], everything[1], strict=True):
+        physics.set_state_vectors(q.astype(np.float64), v.astype(np.float64))
+        physics.forward()
+        d.append(physics.hand_to_capsule())
+    limit = float(np.median(d))  # half of the unfiltered hand-overs are farther than this
+    qpos, qvel, _, refused = collect_handover_states(
+        manager_run, "gripper", 10, seed=2, keep=lambda p: graspable(p, limit, 0.1)
+    )
+    assert refused > 0
+    for q, v in zip(qpos, qvel, strict=True):
+        physics.set_state_vectors(q.astype(np.float64), v.astype(np.float64))
+        physics.forward()
+        assert physics.hand_to_capsule() <= limit + 1e-6 and np.hypot(*v[9:11]) <= 0.1 + 1e-6
+    physics.data.qvel[9] = 0.5  # the capsule sliding at 0.5 m/s is refused, at rest kept
+    assert not graspable(physics, None, 0.1) and graspable(physics, None, 1.0) and graspable(physics, None, None)
 
 
 def test_bad_start_banks_are_refused_when_the_task_is_made(tmp_path):
@@ -99,3 +123,7 @@ def test_dagger_settings_are_checked():
         DaggerConfig("m", "gripper", "g2", starts_fraction=0.0)
     with pytest.raises(ValueError, match="states"):
         DaggerConfig("m", "gripper", "g2", states=0)
+    with pytest.raises(ValueError, match="max_hand_distance must be a positive number"):
+        DaggerConfig("m", "gripper", "g2", max_hand_distance=0.0)
+    with pytest.raises(ValueError, match="max_capsule_speed must be a positive number"):
+        DaggerConfig("m", "gripper", "g2", max_capsule_speed=float("nan"))

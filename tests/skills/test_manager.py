@@ -13,7 +13,7 @@ from hrlp.envs import make
 from hrlp.evaluate import evaluate_run
 from hrlp.policies.mlp import HierarchicalPolicy
 from hrlp.skills import SkillLibrary
-from hrlp.skills.macro_env import MacroEnv, MacroSpec, MicroAction
+from hrlp.skills.macro_env import MacroEnv, MacroSpec, MicroAction, step_macros
 from hrlp.train import TrainConfig, Trainer, load_trained, train
 
 
@@ -104,7 +104,7 @@ def test_batched_skill_inference_matches_one_environment_at_a_time(library):
     rng = np.random.default_rng(0)
     for _ in range(8):
         actions = np.concatenate([rng.integers(0, 3, (5, 1)), rng.uniform(-1.2, 1.2, (5, 12))], axis=1)
-        res = MacroEnv.step_batch(batched, actions)
+        res = step_macros(batched, actions)
         for i, env in enumerate(single):
             blocks = (int(actions[i, 0]), actions[i, 1:1], actions[i, 1:4], actions[i, 4:13])
             obs, r, term, trunc, info = env.step(blocks)
@@ -122,11 +122,11 @@ def test_manager_actions_are_checked(library):
     env = MacroEnv(make("ReachAndGrip2", episode_steps=30), [library.load("reacher")], micro=MicroAction())
     env.reset(seed=0)
     with pytest.raises(ValueError, match=r"shape \(1, 13\)"):
-        MacroEnv.step_batch([env], np.zeros((1, 5)))
+        step_macros([env], np.zeros((1, 5)))
     with pytest.raises(ValueError, match="NaN or inf"):
-        MacroEnv.step_batch([env], np.full((1, 13), np.nan))
+        step_macros([env], np.full((1, 13), np.nan))
     with pytest.raises(ValueError, match=r"integers in \[0, 2\)"):
-        MacroEnv.step_batch([env], np.concatenate([[[2.0]], np.zeros((1, 12))], axis=1))
+        step_macros([env], np.concatenate([[[2.0]], np.zeros((1, 12))], axis=1))
     with pytest.raises(ValueError, match="at least one skill or the micro-action"):
         MacroSpec(())
 

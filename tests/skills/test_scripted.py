@@ -87,7 +87,7 @@ def test_imitation_writes_a_run_that_eval_reads_and_trpo_fine_tunes(tmp_path):
     assert first["acting"] == "expert" and first["states"] == 40 and last["states"] == 60  # 20 steps per episode
     assert first["fit_mse"] < 0.1  # the student's mean follows the expert's torques on the states it saw
     trained = load_trained(tmp_path / "run")
-    assert trained.meta["iteration"] == 0 and trained.config == cfg
+    assert trained.meta["iteration"] == 0 and trained.config == cfg.resolved()  # the workers it used
     assert evaluate_run(tmp_path / "run", episodes=1).episodes == 1
     rows = list(train(dataclasses.replace(cfg, steps=100), tmp_path / "run", resume=True))  # TRPO from the student
     assert len(rows) == 1 and rows[0]["iteration"] == 1

@@ -516,6 +516,11 @@ class BatchedArmEnv:
         """9 torques."""
         return N_JOINTS
 
+    @property
+    def resumable(self) -> bool:
+        """Always: every world's state is saved exactly (:meth:`get_state`)."""
+        return True
+
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Start an episode in every world (world ``i``'s stream seeded with ``seed + i``); returns ``obs [N, obs_dim]``."""
         for i in range(self._n):

@@ -322,8 +322,11 @@ PARAM_TASKS: dict[str, type[_ParamTask]] = {"ParamBandit": ParamBandit, "ParamMa
 #: max KL 0.05 (5x the default 0.01: about 40-150 updates in 20,000 episodes must reach the optimum).
 SHORT_EPISODE_SETTINGS: dict[str, Any] = {
     "batch_steps": _CLI_SHORT["batch_steps"],
-    "num_envs": 16,
+    "num_envs": _CLI_SHORT["num_envs"],
     "trpo.max_kl": _CLI_SHORT["max_kl"],
+    "trpo.fisher_fraction": _CLI_SHORT["fisher_fraction"],
+    "value.max_iter": _CLI_SHORT["value_iters"],
+    "value.fraction": _CLI_SHORT["value_fraction"],
 }
 
 

@@ -1,10 +1,14 @@
 """The vector-environment seam: one typed step record and one protocol that every batch of environments implements.
 
 A :class:`VectorEnv` steps ``N`` environments together: ``reset(seed) -> obs [N, obs_dim]`` and
-``step(actions [N, act_dim]) -> VectorStep``. The sampler (a later change) will see only this protocol, whether the
-``N`` environments are ordinary Gymnasium environments stepped one by one (:class:`SerialVectorEnv`, the reference
-implementation here), hrlp's batched MuJoCo backend (:class:`hrlp.envs.batched.BatchedArmEnv`), a Manager's
-macro-action environment or, later, a GPU backend.
+``step(actions [N, act_dim]) -> VectorStep``. The sampler (:class:`hrlp.rollout.Sampler`) sees only this protocol,
+whether the ``N`` environments are ordinary Gymnasium environments stepped one by one (:class:`SerialVectorEnv`, the
+reference implementation here), hrlp's batched MuJoCo backend (:class:`hrlp.envs.batched.BatchedArmEnv`), a
+Manager's macro-action environments (:class:`hrlp.skills.macro_env.MacroVectorEnv`) or, later, a GPU backend.
+
+Actions are flat float rows: a Box action as it is, a Discrete one as one number, a parameterised
+``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` one as ``[k, u_1, ..., u_n]`` (the policy's encoding);
+:func:`action_decoder` turns them into the environment's own actions.
 
 Autoreset convention (Gymnasium's "same-step" mode): when a step ends an episode (terminated or truncated), the
 environment is reset within that step. :attr:`VectorStep.next_obs` holds the observation the step produced (an
@@ -20,13 +24,20 @@ each environment's own random stream.
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
+
+from hrlp.envs.check import parameterised_dims
+
+NO_SUCCESS_TEST = "no_success_test"
+"""Key of :attr:`VectorStep.infos`, ``[N]`` bool, present only on a step where some environment reports no success
+test (no ``info['success']``, as Gymnasium's own tasks): True for those environments, whose ``success`` is then False."""
 
 
 @dataclass(frozen=True)
@@ -73,6 +84,12 @@ class VectorEnv(Protocol):
         """Length of one action."""
         ...
 
+    @property
+    def resumable(self) -> bool:
+        """Whether :meth:`get_state` and :meth:`set_state` continue exactly (False where an environment cannot save its
+        state, as most Gymnasium ids)."""
+        ...
+
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Start a new episode in every environment (environment ``i`` seeded with ``seed + i``); returns
         ``obs [N, obs_dim]``."""
@@ -116,9 +133,10 @@ def check_num_envs(n: object, who: str) -> int:
 
 
 def check_gamma(gamma: object, who: str) -> float:
-    """``gamma`` as a float if it is a number in (0, 1]; else a one-line ValueError naming ``who``."""
-    if isinstance(gamma, bool) or not isinstance(gamma, int | float) or not 0 < gamma <= 1:
-        raise ValueError(f"{who}: gamma must be a number in (0, 1], got {gamma!r}")
+    """``gamma`` as a float if it is a number in [0, 1] (0: a bandit's, every step its own episode for the returns);
+    else a one-line ValueError naming ``who``."""
+    if isinstance(gamma, bool) or not isinstance(gamma, int | float) or not 0 <= gamma <= 1:
+        raise ValueError(f"{who}: gamma must be a number in [0, 1], got {gamma!r}")
     return float(gamma)
 
 
@@ -145,18 +163,62 @@ def info_arrays(infos: Sequence[Mapping[str, Any]], skip: frozenset[str] = froze
     return out
 
 
+def flat_action_dim(space: gym.Space) -> int:
+    """Length of one flat action row for ``space``: a Box's size, 1 for Discrete, ``1 + d_1 + ... + d_n`` for a
+    parameterised ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))``; ValueError for any other space."""
+    if isinstance(space, gym.spaces.Box):
+        return int(np.prod(space.shape))
+    if isinstance(space, gym.spaces.Discrete):
+        return 1
+    return 1 + sum(parameterised_dims(space))
+
+
+def action_decoder(space: gym.Space) -> Callable[[np.ndarray], Sequence]:
+    """How the policy's batched actions ``[N, ...]`` become ``N`` environment actions for ``space``.
+
+    Box: clipped to the bounds. Discrete: integers. ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` (a parameterised
+    action space): ``(k, u_1, ..., u_n)`` tuples with each block clipped to its bounds. Other spaces raise ValueError.
+    """
+    if isinstance(space, gym.spaces.Box):
+        low, high, shape = space.low, space.high, space.shape
+        return lambda a: np.clip(a.reshape(a.shape[0], *shape), low, high)
+    if isinstance(space, gym.spaces.Discrete):
+        start = int(space.start)
+        return lambda a: (a.reshape(-1).astype(np.int64) + start).tolist()
+    dims = parameterised_dims(space)
+    blocks = space.spaces[1:]
+    bounds = list(itertools.pairwise(np.cumsum([1, *dims])))
+
+    def decode(a: np.ndarray) -> list[tuple]:
+        # The hierarchical encoding of hrlp.policies.distributions.flat_to_tuple: the choice rounded, float32 blocks.
+        return [(round(float(row[0])), *(np.clip(row[lo:hi].astype(np.float32), b.low, b.high)
+                                          for (lo, hi), b in zip(bounds, blocks, strict=True)))
+                for row in np.asarray(a).reshape(len(a), -1)]  # fmt: skip
+
+    return decode
+
+
+def physics_seconds(envs: Sequence[gym.Env]) -> float:
+    """CPU seconds ``envs`` have spent inside ``mj_step`` so far, summed (their ``physics_seconds`` counters); NaN if
+    any of them does not count it (Gymnasium's own environments do not)."""
+    return sum(float(getattr(env.unwrapped, "physics_seconds", math.nan)) for env in envs)
+
+
 class SerialVectorEnv:
     """The reference :class:`VectorEnv`: ``N`` ordinary Gymnasium environments stepped one after another.
 
     Args:
-        envs: the environments (hrlp's :class:`~hrlp.envs.arm_env.ArmEnv` or any Gymnasium environment with a flat
-            ``Box`` observation and action space); they are reset and stepped by this object from now on.
+        envs: the environments (hrlp's :class:`~hrlp.envs.arm_env.ArmEnv` or any Gymnasium environment with a Box
+            observation space and a Box, Discrete or parameterised ``Tuple`` action space); they are reset and
+            stepped by this object from now on.
         gamma: the discount per step (``discount = gamma``, ``tau = 1``).
 
-    Each step calls ``env.step`` on every environment and ``env.reset()`` (no seed: the environment's own stream
-    continues) on those whose episode ended. ``success`` is ``info['success']`` (False where absent), ``infos``
-    holds the scalar info values as arrays (:func:`info_arrays`), ``physics_seconds`` the sum of the environments'
-    own ``physics_seconds`` counters (ArmEnv: CPU seconds inside ``mj_step``; NaN if an environment has none).
+    Each step decodes the flat action rows with :func:`action_decoder` (in the dtype they come in), calls
+    ``env.step`` on every environment and ``env.reset()`` (no seed: the environment's own stream continues) on those
+    whose episode ended. Observations are flattened to float64 rows. ``success`` is ``info['success']`` (False where
+    absent; :data:`NO_SUCCESS_TEST` then marks it), ``infos`` holds the scalar info values as arrays
+    (:func:`info_arrays`), ``physics_seconds`` the growth of the environments' own ``physics_seconds`` counters over
+    the step and its resets (ArmEnv: CPU seconds inside ``mj_step``; NaN if an environment has none).
     """
 
     def __init__(self, envs: Sequence[gym.Env], gamma: float = 0.99) -> None:
@@ -165,7 +227,8 @@ class SerialVectorEnv:
         self.gamma = check_gamma(gamma, "SerialVectorEnv")
         first = self.envs[0]
         self._obs_dim = int(np.prod(first.observation_space.shape))
-        self._act_dim = int(np.prod(first.action_space.shape))
+        self._act_dim = flat_action_dim(first.action_space)
+        self._decode = action_decoder(first.action_space)
         self._obs: np.ndarray | None = None
 
     @property
@@ -180,8 +243,13 @@ class SerialVectorEnv:
 
     @property
     def act_dim(self) -> int:
-        """Length of one action."""
+        """Length of one flat action row (:func:`flat_action_dim`)."""
         return self._act_dim
+
+    @property
+    def resumable(self) -> bool:
+        """Whether every environment can save and restore its exact state (hrlp tasks can; most Gymnasium ids not)."""
+        return all(hasattr(env.unwrapped, "get_state") for env in self.envs)
 
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Reset every environment (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
@@ -194,23 +262,28 @@ class SerialVectorEnv:
         if self._obs is None:
             raise RuntimeError("SerialVectorEnv: call reset() before step()")
         n = self.num_envs
-        a = check_actions(actions, n, self._act_dim, "SerialVectorEnv")
+        check_actions(actions, n, self._act_dim, "SerialVectorEnv")
+        decoded = self._decode(np.asarray(actions))
         next_obs = np.empty((n, self._obs_dim))
         rewards = np.empty(n)
         terminated, truncated, success = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
         infos: list[Mapping[str, Any]] = []
-        physics0 = self._physics_seconds()
+        physics0 = physics_seconds(self.envs)
         for i, env in enumerate(self.envs):
-            o, r, term, trunc, info = env.step(a[i])
+            o, r, term, trunc, info = env.step(decoded[i])
             next_obs[i], rewards[i] = np.ravel(o), r
             terminated[i], truncated[i] = term, trunc and not term
             success[i] = bool(info.get("success", False))
             infos.append(info)
-        physics = self._physics_seconds() - physics0
         obs = next_obs.copy()
         for i in np.flatnonzero(terminated | truncated):
             obs[i] = np.ravel(self.envs[i].reset()[0])
+        physics = physics_seconds(self.envs) - physics0
         self._obs = obs
+        arrays = info_arrays(infos)
+        reported = np.array(["success" in info for info in infos])
+        if not reported.all():
+            arrays[NO_SUCCESS_TEST] = ~reported
         return VectorStep(
             obs=obs.copy(),
             next_obs=next_obs,
@@ -220,7 +293,7 @@ class SerialVectorEnv:
             terminated=terminated,
             truncated=truncated,
             success=success,
-            infos=info_arrays(infos),
+            infos=arrays,
             physics_seconds=physics,
         )
 
@@ -245,9 +318,17 @@ class SerialVectorEnv:
         for env in self.envs:
             env.close()
 
-    def _physics_seconds(self) -> float:
-        # Gymnasium environments other than hrlp's do not count their physics time: the sum is then NaN.
-        return sum(float(getattr(env.unwrapped, "physics_seconds", math.nan)) for env in self.envs)
 
-
-__all__ = ["SerialVectorEnv", "VectorEnv", "VectorStep", "check_actions", "check_gamma", "check_num_envs", "info_arrays"]
+__all__ = [
+    "NO_SUCCESS_TEST",
+    "SerialVectorEnv",
+    "VectorEnv",
+    "VectorStep",
+    "action_decoder",
+    "check_actions",
+    "check_gamma",
+    "check_num_envs",
+    "flat_action_dim",
+    "info_arrays",
+    "physics_seconds",
+]

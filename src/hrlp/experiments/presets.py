@@ -5,6 +5,11 @@ paper's number for each run where the paper gives one, so ``hrlp tables`` can pr
 it. ``budget`` is the default number of environment steps per run; the paper's own budgets
 (50 million steps for a flat reach-and-grip run) are far beyond one machine, and
 ``hrlp reproduce --budget`` overrides it.
+
+Every run is built with the paper's settings, :data:`~hrlp.config.PAPER_SETTINGS` (one process, 16 environments,
+exact Fisher-vector products, the baseline by 25 L-BFGS iterations on every state), written into its config rather
+than taken from :class:`~hrlp.train.TrainConfig`'s defaults, which are faster: a preset keeps the settings its runs
+ran with (``tests/test_preset_configs.py`` compares every run's config with a snapshot).
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ import itertools
 import math
 from dataclasses import dataclass, field, replace
 
-from hrlp.algos.trpo import TRPOConfig
+from hrlp.config import PAPER_SETTINGS, with_settings
 from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 from hrlp.train import TrainConfig
 
@@ -63,19 +68,24 @@ class Preset:
         return replace(run.config, seed=seed, steps=run.steps or self.budget)
 
 
+def _paper(task: str, batch: int, **kw: object) -> TrainConfig:
+    """A run's config with the paper's settings (:data:`PAPER_SETTINGS`), then ``kw``."""
+    return replace(with_settings(TrainConfig(task=task), PAPER_SETTINGS), batch_steps=batch, **kw)  # type: ignore[arg-type]
+
+
 def _flat(task: str, batch: int = 50_000, **kw: object) -> TrainConfig:
-    return TrainConfig(task=task, batch_steps=batch, num_envs=16, **kw)  # type: ignore[arg-type]
+    return _paper(task, batch, **kw)
 
 
 def _manager(task: str, skills: tuple[str, ...], k: int, micro: bool = False, **kw: object) -> TrainConfig:
     spec = MacroSpec(skills, k=k, micro=MicroAction() if micro else None)
-    return TrainConfig(task=task, batch_steps=5_000, num_envs=16, macro=spec, **kw)  # type: ignore[arg-type]
+    return _paper(task, 5_000, macro=spec, **kw)
 
 
 def _tuned(config: TrainConfig) -> TrainConfig:
     """A Manager's config with the demo's settings: 2,000 decisions per batch and max KL 0.02 (more, larger updates
     than the paper's 5,000 decisions and 0.01 at the budgets one machine affords)."""
-    return replace(config, batch_steps=2_000, trpo=_kl(0.02))
+    return _kl(replace(config, batch_steps=2_000), 0.02)
 
 
 def _tuned_manager(skills: tuple[str, ...], micro: bool) -> TrainConfig:
@@ -96,8 +106,9 @@ def _handover(config: TrainConfig) -> TrainConfig:
     return replace(config, macro=replace(config.macro, handover=Handover()), init_log_std=-1.0)
 
 
-def _kl(max_kl: float) -> TRPOConfig:
-    return TRPOConfig(max_kl=max_kl)
+def _kl(config: TrainConfig, max_kl: float) -> TrainConfig:
+    """``config`` with the trust region's radius ``max_kl`` (its other TRPO settings kept)."""
+    return replace(config, trpo=replace(config.trpo, max_kl=max_kl))
 
 
 # Figure 6: reach-and-grip Experiment 1 (a Manager over gripper + reacher, k = 10; "Table 6 presents results of
@@ -145,7 +156,7 @@ def _appendix_c_tuned() -> tuple[Preset, ...]:
             "manager-kl-tuned",
             f"{what} over the maximal KL",
             "Appendix C",
-            tuple(Run(f"max_kl={kl:g}", replace(base, trpo=_kl(kl))) for kl in (0.005, 0.02, 0.08)),
+            tuple(Run(f"max_kl={kl:g}", _kl(base, kl)) for kl in (0.005, 0.02, 0.08)),
             budget=3_000_000,
         ),
         Preset(
@@ -393,7 +404,7 @@ PRESETS: dict[str, Preset] = {
             "reach-and-grip Experiment 2, flat, over the maximal KL (curriculum alpha = pi / 1e5)",
             "Appendix B.2, Figure 10",
             tuple(
-                Run(f"max_kl={kl:g}", _flat("ReachAndGrip2", trpo=_kl(kl), task_kwargs={"curriculum_alpha": math.pi / 1e5}))
+                Run(f"max_kl={kl:g}", _kl(_flat("ReachAndGrip2", task_kwargs={"curriculum_alpha": math.pi / 1e5}), kl))
                 for kl in (0.001, 0.01, 0.1)
             ),
         ),
@@ -402,7 +413,7 @@ PRESETS: dict[str, Preset] = {
             "Appendix C: the Manager (gripper + reacher, Experiment 2) over the maximal KL",
             "Appendix C",
             tuple(
-                Run(f"max_kl={kl:g}", _manager("ReachAndGrip2", ("gripper", "reacher"), 15, trpo=_kl(kl)))
+                Run(f"max_kl={kl:g}", _kl(_manager("ReachAndGrip2", ("gripper", "reacher"), 15), kl))
                 for kl in (0.003, 0.01, 0.03)
             ),
         ),

@@ -103,7 +103,7 @@ def find_same_run(job: Job) -> Path | None:
 
 def _same_config(found: Any, want: dict[str, Any]) -> bool:
     """Whether a result's config is ``want``, read as :class:`TrainConfig` reads it: a field added to the config after
-    the run was made takes its default (which the run trained with)."""
+    the run was made takes the value the run trained with (its default then: TrainConfig.from_json)."""
     if not isinstance(found, dict):
         return False
     try:

@@ -207,7 +207,7 @@ class HierarchicalPolicy(Policy):
 def policy_for_space(obs_dim: int, space: gym.Space, hidden: Sequence[int] = (64, 64), init_log_std: float = 0.0) -> Policy:
     """The policy for an action space: Box -> Gaussian, Discrete -> categorical, ``Tuple(Discrete(n), Box(d_1), ...,
     Box(d_n))`` -> hierarchical (the Manager). Raises ValueError for any other space."""
-    from hrlp.rollout import parameterised_dims
+    from hrlp.envs.check import parameterised_dims
 
     if isinstance(space, gym.spaces.Box):
         return GaussianPolicy(obs_dim, int(np.prod(space.shape)), hidden, init_log_std=init_log_std)

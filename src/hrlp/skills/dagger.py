@@ -21,7 +21,9 @@ yet finished.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -32,6 +34,7 @@ import numpy as np
 import torch
 
 from hrlp.atomic import atomic_path
+from hrlp.envs.physics import N_JOINTS, ArmPhysics
 from hrlp.envs.tasks import HANDOVER_BANK
 from hrlp.skills.library import SkillLibrary, default_library_root, locate_skill, search_roots
 from hrlp.skills.starts import write_start_bank
@@ -66,8 +69,16 @@ class DaggerConfig:
     """Evaluation episodes for each success rate the round reports."""
     seed: int = 0
     """Seed of the collection and both trainings."""
+    max_hand_distance: float | None = None
+    """Keep only hand-over states with d(H, C) at most this, metres (None: every state the Manager hands over at)."""
+    max_capsule_speed: float | None = None
+    """Keep only hand-over states whose capsule moves slower than this across the table, m/s (None: any speed)."""
 
     def __post_init__(self) -> None:
+        for name in ("max_hand_distance", "max_capsule_speed"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, int | float) or not 0 < v < float("inf")):
+                raise ValueError(f"dagger: {name} must be a positive number, got {v!r}")
         for name in ("states", "skill_steps", "workers", "eval_episodes"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
@@ -80,12 +91,30 @@ class DaggerConfig:
             raise ValueError(f"dagger: the retrained skill needs a new name, not {self.skill!r}")
 
 
+def graspable(physics: ArmPhysics, max_hand_distance: float | None, max_capsule_speed: float | None) -> bool:
+    """Whether a grip can start from ``physics``'s state: H within ``max_hand_distance`` of C and the capsule moving
+    slower than ``max_capsule_speed`` across the table (None: no limit)."""
+    if max_hand_distance is not None and physics.hand_to_capsule() > max_hand_distance:
+        return False
+    if max_capsule_speed is not None:
+        vx, vy = physics.data.qvel[N_JOINTS : N_JOINTS + 2]  # the capsule's free joint: linear velocity first
+        if math.hypot(vx, vy) > max_capsule_speed:
+            return False
+    return True
+
+
 def collect_handover_states(
-    manager_run: Path, skill: str, states: int, seed: int = 0, progress: Callable[[int, int], None] | None = None
-) -> tuple[np.ndarray, np.ndarray, int]:
+    manager_run: Path,
+    skill: str,
+    states: int,
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+    keep: Callable[[ArmPhysics], bool] | None = None,
+) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Physics states ``(qpos [states, nq], qvel [states, nv])`` at which the Manager of ``manager_run``, sampling
-    its actions, chose ``skill``, and the number of episodes it took. Raises ValueError if the Manager has no such
-    skill or never chooses it in 200 episodes."""
+    its actions, chose ``skill`` (and, with ``keep``, for which ``keep(physics)`` holds, e.g. :func:`graspable`), the
+    number of episodes it took and the number of hand-overs ``keep`` refused. Raises ValueError if the Manager has no
+    such skill or never chooses it (or no state is kept) in 200 episodes."""
     from hrlp.train import load_trained
 
     trained = load_trained(manager_run)
@@ -99,15 +128,18 @@ def collect_handover_states(
     gen = torch.Generator().manual_seed(seed)
     qpos: list[np.ndarray] = []
     qvel: list[np.ndarray] = []
-    episodes = 0
+    episodes, refused = 0, 0
     while len(qpos) < states:
         if episodes >= 200 and not qpos:
-            raise ValueError(f"{manager_run}: the Manager did not choose {skill!r} in {episodes} episodes")
+            kept = f" at a state the filter keeps ({refused} refused)" if refused else ""
+            raise ValueError(f"{manager_run}: the Manager did not choose {skill!r}{kept} in {episodes} episodes")
         obs, _ = env.reset(seed=seed * 100_003 + episodes)
         episodes += 1
         while True:
             action = trained.act(env, obs, gen, deterministic=False)
-            if int(action[0]) == index and len(qpos) < states:
+            if int(action[0]) == index and len(qpos) < states and keep is not None and not keep(physics):
+                refused += 1
+            elif int(action[0]) == index and len(qpos) < states:
                 qpos.append(physics.data.qpos.copy())
                 qvel.append(physics.data.qvel.copy())
                 if progress is not None:
@@ -116,7 +148,7 @@ def collect_handover_states(
             if term or trunc:
                 break
     env.close()
-    return np.stack(qpos), np.stack(qvel), episodes
+    return np.stack(qpos), np.stack(qvel), episodes, refused
 
 
 def skill_config(parent: dict[str, Any], bank: Path, cfg: DaggerConfig, init_from: str) -> Any:
@@ -155,7 +187,8 @@ def run_round(cfg: DaggerConfig, out_dir: Path, console: Any = None) -> dict[str
         raise ValueError(f"skill {cfg.name!r} already exists in {library.root}; choose another --name")
     out_dir.mkdir(parents=True, exist_ok=True)
     plan = out_dir / "dagger.json"
-    if plan.exists() and json.loads(plan.read_text()) != dataclasses.asdict(cfg):
+    defaults = {f.name: f.default for f in dataclasses.fields(DaggerConfig) if f.default is not dataclasses.MISSING}
+    if plan.exists() and {**defaults, **json.loads(plan.read_text())} != dataclasses.asdict(cfg):
         raise ValueError(f"{out_dir} holds a round with other settings ({plan}); choose another directory")
     with atomic_path(plan) as tmp:
         tmp.write_text(json.dumps(dataclasses.asdict(cfg), indent=2))
@@ -164,11 +197,17 @@ def run_round(cfg: DaggerConfig, out_dir: Path, console: Any = None) -> dict[str
     bank = out_dir / "starts.npz"
     if not bank.exists():
         console.print(f"collecting {cfg.states} states where {manager_run} chooses {cfg.skill}")
-        qpos, qvel, episodes = collect_handover_states(manager_run, cfg.skill, cfg.states, cfg.seed)
+        keep = None
+        if cfg.max_hand_distance is not None or cfg.max_capsule_speed is not None:
+            keep = functools.partial(graspable, max_hand_distance=cfg.max_hand_distance,
+                                     max_capsule_speed=cfg.max_capsule_speed)  # fmt: skip
+        qpos, qvel, episodes, refused = collect_handover_states(manager_run, cfg.skill, cfg.states, cfg.seed, keep=keep)
         meta = {"manager_run": str(manager_run), "skill": cfg.skill, "skill_sha256": parent.content_hash,
-                "episodes": str(episodes)}  # fmt: skip
+                "episodes": str(episodes), "refused": str(refused), "max_hand_distance": str(cfg.max_hand_distance),
+                "max_capsule_speed": str(cfg.max_capsule_speed)}  # fmt: skip
         write_start_bank(bank, {HANDOVER_BANK: (qpos, qvel)}, meta)
-        console.print(f"{len(qpos)} states from {episodes} episodes -> {bank}")
+        refusals = f" ({refused} hand-overs refused by the filter)" if keep is not None else ""
+        console.print(f"{len(qpos)} states from {episodes} episodes{refusals} -> {bank}")
 
     skill_run = out_dir / "skill"
     scfg = skill_config(parent_manifest, bank.resolve(), cfg, str(parent_dir.resolve()))
@@ -252,4 +291,4 @@ def _parent_as_run(retrain: Any, run_dir: Path) -> Path:
     return run_dir
 
 
-__all__ = ["DaggerConfig", "collect_handover_states", "run_round", "skill_config"]
+__all__ = ["DaggerConfig", "collect_handover_states", "graspable", "run_round", "skill_config"]

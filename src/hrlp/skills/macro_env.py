@@ -16,7 +16,8 @@ to the next decision (semi-Markov discounting).
 
 :func:`step_macros` runs one decision in each of ``N`` environments together, so every
 low-level step evaluates each skill once for all the environments running it (batched skill
-inference); :meth:`MacroEnv.step_batch` is how the sampler uses it.
+inference); :class:`MacroVectorEnv` is the :class:`~hrlp.envs.vector.VectorEnv` built on it, the
+one the sampler steps a Manager's environments through.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import numpy as np
 
 from hrlp.envs.arm_env import ArmEnv
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
+from hrlp.envs.vector import VectorStep, check_num_envs, info_arrays, physics_seconds
 from hrlp.skills.skill import HANDOVER_POINT, POINT_TASKS, Skill
 
 _HAND_XY = slice(18, 20)  # the hand H's x, y in the base observation
@@ -214,11 +216,6 @@ class MacroEnv(gym.Env):
         self.env.set_state(state["env"])
         self._obs = np.asarray(state["obs"], dtype=np.float64)
 
-    @staticmethod
-    def step_batch(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
-        """One decision in each of ``envs`` from flat hierarchical actions ``[N, 1 + S]`` (see :func:`step_macros`)."""
-        return step_macros(envs, actions)
-
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """The low-level task's frame."""
         return self.env.render()
@@ -296,6 +293,116 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     for e, o in zip(envs, obs, strict=True):
         e._obs = o.copy()
     return MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, infos)
+
+
+class MacroVectorEnv:
+    """``N`` Manager environments as one :class:`~hrlp.envs.vector.VectorEnv`: a step is one decision in each, run by
+    :func:`step_macros` (batched skill inference), with same-step autoreset (:mod:`hrlp.envs.vector`).
+
+    Args:
+        envs: :class:`MacroEnv`s over the same skills, durations, micro-action and gamma (the Manager's environments
+            of one run); they are reset and stepped by this object from now on.
+
+    A step maps :class:`MacroStep` onto :class:`~hrlp.envs.vector.VectorStep`: ``rewards`` the discounted in-macro
+    reward ``sum_j gamma^j r_j``, ``discount = gamma^tau``, ``tau`` the low-level steps taken; ``next_obs`` the state
+    after the macro-action (an ended episode's real last observation), ``obs`` the reset one where an episode ended.
+    ``infos`` holds the scalar values of each environment's last low-level info (:func:`~hrlp.envs.vector.info_arrays`),
+    ``task_reward`` (the undiscounted sum of the task's rewards, what an episode's return counts) and ``choice`` (the
+    macro-action run); ``success`` is the last low-level ``info['success']``. :meth:`get_state` is
+    ``{"envs": [MacroEnv.get_state() per environment], "obs": [N, obs_dim]}``.
+    """
+
+    def __init__(self, envs: Sequence[MacroEnv]) -> None:
+        self.envs = list(envs)
+        check_num_envs(len(self.envs), "MacroVectorEnv")
+        first = self.envs[0]
+        for i, e in enumerate(self.envs):
+            if not isinstance(e, MacroEnv):
+                raise ValueError(f"MacroVectorEnv: environment {i} is a {type(e).__name__}, not a MacroEnv")
+            same = (e.names == first.names and np.array_equal(e.durations, first.durations)
+                    and e.param_dims == first.param_dims and e.gamma == first.gamma)  # fmt: skip
+            if not same:
+                raise ValueError(f"MacroVectorEnv: environment {i} has other macro-actions, durations or gamma than "
+                                 "environment 0; the environments of one Manager must share them")  # fmt: skip
+        self.gamma = first.gamma
+        self._obs_dim = int(np.prod(first.observation_space.shape))
+        self._act_dim = 1 + int(first.offsets[-1])
+        self._obs: np.ndarray | None = None
+
+    @property
+    def num_envs(self) -> int:
+        """N."""
+        return len(self.envs)
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of one observation (the low-level task's)."""
+        return self._obs_dim
+
+    @property
+    def act_dim(self) -> int:
+        """``1 + S``: the choice, then every parameter block."""
+        return self._act_dim
+
+    @property
+    def resumable(self) -> bool:
+        """Always: a MacroEnv saves its low-level task's exact state."""
+        return True
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Reset every environment (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
+        obs = [env.reset(seed=None if seed is None else seed + i)[0] for i, env in enumerate(self.envs)]
+        self._obs = np.stack(obs).astype(np.float64).reshape(self.num_envs, self._obs_dim)
+        return self._obs.copy()
+
+    def step(self, actions: np.ndarray) -> VectorStep:
+        """One decision in every environment from flat hierarchical actions ``[N, 1 + S]`` (checked by
+        :func:`step_macros`); resets those whose episode ended."""
+        if self._obs is None:
+            raise RuntimeError("MacroVectorEnv: call reset() before step()")
+        physics0 = physics_seconds(self.envs)
+        res = step_macros(self.envs, actions)
+        next_obs = np.asarray(res.obs, dtype=np.float64).reshape(self.num_envs, self._obs_dim)
+        obs = next_obs.copy()
+        for i in np.flatnonzero(res.terminated | res.truncated):
+            obs[i] = np.ravel(self.envs[i].reset()[0])
+        physics = physics_seconds(self.envs) - physics0
+        self._obs = obs
+        infos = info_arrays(res.infos)
+        infos["task_reward"] = res.task_reward
+        infos["choice"] = res.choice
+        return VectorStep(
+            obs=obs.copy(),
+            next_obs=next_obs,
+            rewards=res.rewards,
+            discount=res.discount,
+            tau=res.tau,
+            terminated=res.terminated,
+            truncated=res.truncated,
+            success=np.array([bool(info.get("success", False)) for info in res.infos]),
+            infos=infos,
+            physics_seconds=physics,
+        )
+
+    def get_state(self) -> dict[str, Any]:
+        """Each environment's :meth:`MacroEnv.get_state` and the current observations (JSON-serialisable)."""
+        if self._obs is None:
+            raise RuntimeError("MacroVectorEnv: call reset() before get_state()")
+        return {"envs": [env.get_state() for env in self.envs], "obs": self._obs.tolist()}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`get_state`."""
+        if len(state["envs"]) != self.num_envs:
+            raise ValueError(f"MacroVectorEnv: the saved state has {len(state['envs'])} environments, this one "
+                             f"{self.num_envs}")  # fmt: skip
+        for env, s in zip(self.envs, state["envs"], strict=True):
+            env.set_state(s)
+        self._obs = np.asarray(state["obs"], dtype=np.float64).reshape(self.num_envs, self._obs_dim)
+
+    def close(self) -> None:
+        """Close every environment."""
+        for env in self.envs:
+            env.close()
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,71 @@
+"""Every preset keeps the settings its runs ran with: each run's config (its first seed's, with the run's budget) equals
+the snapshot in ``tests/data/preset_configs.json``, whatever TrainConfig's own defaults are (the presets pin the paper's
+settings, ``hrlp.experiments.presets.PAPER_SETTINGS``, and a finished run is found again by its config).
+
+The snapshot was written before the defaults changed (issue 17). A preset whose settings change on purpose is written
+again with ``python tests/test_preset_configs.py --write``, and the diff of the JSON file shows what changed.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+SNAPSHOT = Path(__file__).parent / "data" / "preset_configs.json"
+
+
+def preset_configs() -> dict[str, Any]:
+    """``{preset: {"seeds": [...], "runs": {run: config}}}``: each run's config as its first seed runs it, through JSON."""
+    from hrlp.experiments.presets import PRESETS
+
+    out = {
+        name: {"seeds": list(p.seeds), "runs": {r.name: p.config(r, p.seeds[0]).to_json() for r in p.runs}}
+        for name, p in PRESETS.items()
+    }
+    return json.loads(json.dumps(out))
+
+
+def _dump(configs: dict[str, Any]) -> str:
+    """The snapshot's text: one line per run's config, so that a diff names the run whose settings changed."""
+    lines = ["{"]
+    for i, (name, p) in enumerate(configs.items()):
+        lines.append(f"  {json.dumps(name)}: {{")
+        lines.append(f'    "seeds": {json.dumps(p["seeds"])},')
+        lines.append('    "runs": {')
+        runs = list(p["runs"].items())
+        lines += [f"      {json.dumps(r)}: {json.dumps(c, sort_keys=True)}{',' if j < len(runs) - 1 else ''}"
+                  for j, (r, c) in enumerate(runs)]  # fmt: skip
+        lines.append("    }")
+        lines.append("  }" + ("," if i < len(configs) - 1 else ""))
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+def test_every_presets_configs_equal_the_snapshot():
+    saved = json.loads(SNAPSHOT.read_text())
+    now = preset_configs()
+    assert list(now) == list(saved), "presets added or removed: write the snapshot again (see the module's docstring)"
+    for name, preset in saved.items():
+        assert now[name]["seeds"] == preset["seeds"], name
+        assert list(now[name]["runs"]) == list(preset["runs"]), name
+        for run, config in preset["runs"].items():
+            assert now[name]["runs"][run] == config, f"{name} / {run}"
+
+
+def test_the_snapshot_pins_one_process_and_the_papers_update():
+    # What the presets ran with before the defaults became the fast ones: one process, exact Fisher products, the
+    # baseline by modular_rl's 25 L-BFGS iterations on the whole batch.
+    for preset in json.loads(SNAPSHOT.read_text()).values():
+        for config in preset["runs"].values():
+            assert config["workers"] == 1 and config["num_envs"] == 16
+            assert config["trpo"]["fisher_fraction"] == 1.0
+            assert (config["value"]["max_iter"], config["value"]["fraction"]) == (25, 1.0)
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--write"]:
+        sys.exit(f"usage: python {sys.argv[0]} --write  (rewrites {SNAPSHOT} from the presets as they are now)")
+    SNAPSHOT.write_text(_dump(preset_configs()))
+    print(f"wrote {SNAPSHOT}")
