@@ -137,13 +137,14 @@ def collect_handover_states(
         episodes += 1
         while True:
             action = trained.act(env, obs, gen, deterministic=False)
-            if int(action[0]) == index and len(qpos) < states and keep is not None and not keep(physics):
-                refused += 1
-            elif int(action[0]) == index and len(qpos) < states:
-                qpos.append(physics.data.qpos.copy())
-                qvel.append(physics.data.qvel.copy())
-                if progress is not None:
-                    progress(len(qpos), states)
+            if int(action[0]) == index and len(qpos) < states:
+                if keep is not None and not keep(physics):
+                    refused += 1
+                else:
+                    qpos.append(physics.data.qpos.copy())
+                    qvel.append(physics.data.qvel.copy())
+                    if progress is not None:
+                        progress(len(qpos), states)
             obs, _, term, trunc, _ = env.step(action)
             if term or trunc:
                 break
