@@ -10,9 +10,10 @@ BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 CASES = {  # script: (arguments, a line its output must contain)
     "gripper_diagnosis.py": ("--episodes 2 --steps 30", "failed episodes"),
+    "eval_speed.py": ("--episodes 3 --steps 40 --batch-steps 40 --num-envs 4", "same results: True"),
     "env_step.py": ("--steps 200 --repeats 1 --tasks Reacher,Gripper", "median env/physics time ratio"),
     "stability.py": ("--steps 200 --tasks Reacher", "unstable episodes"),
-    "manager_speed.py": ("--rounds 1 --flat-batch 400 --manager-batch 40 --workers 1", "Manager / flat: sampling"),
+    "manager_speed.py": ("--rounds 1 --flat-batch 400 --manager-batch 40 --num-envs 8", "Manager / flat: sampling"),
     "trpo_speed.py": (
         "--steps 1000 --batch-steps 500 --arm-steps 500 --physics-steps 300 --workers 1 --defaults-batch-steps 500 "
         "--skip sb3,tianshou,rss",

@@ -30,7 +30,8 @@ def test_the_defaults_are_the_fast_settings():
     paper = with_settings(cfg, PAPER_SETTINGS)
     assert (paper.workers, paper.num_envs, paper.trpo.fisher_fraction) == (1, 16, 1.0)
     assert (paper.value.max_iter, paper.value.fraction) == (25, 1.0)
-    assert dataclasses.replace(paper, workers=0, num_envs=64, trpo=cfg.trpo, value=cfg.value) == cfg  # nothing else
+    assert cfg.backend == "auto" and paper.backend == "serial"
+    assert dataclasses.replace(paper, workers=0, num_envs=64, trpo=cfg.trpo, value=cfg.value, backend="auto") == cfg
 
 
 def test_a_small_batch_works_with_the_defaults():
@@ -47,7 +48,44 @@ def test_the_worker_count_follows_the_cores_capped_by_the_environments(monkeypat
     assert TrainConfig(task="Reacher", num_envs=8, batch_steps=80).resolved().workers == 3
     assert TrainConfig(task="Reacher", num_envs=2, batch_steps=80).resolved().workers == 2
     explicit = TrainConfig(task="Reacher", num_envs=8, batch_steps=80, workers=1)
-    assert explicit.resolved() is explicit  # a count given is used as given
+    assert explicit.resolved().workers == 1  # a count given is used as given
+
+
+def test_the_backend_is_batched_for_arm_tasks_and_serial_elsewhere():
+    from hrlp.skills.macro_env import MacroSpec
+
+    assert TrainConfig(task="Reacher").resolved().backend == "batched"
+    assert TrainConfig(task="hrlp/ReachAndGrip2-v0").resolved().backend == "batched"
+    manager = TrainConfig(task="ReachAndGrip1", macro=MacroSpec(skills=("gripper", "reacher"), k=10))
+    assert manager.resolved().backend == "batched"
+    assert TrainConfig(task="Pendulum-v1").resolved().backend == "serial"
+    assert TrainConfig(task="ParamMatch").resolved().backend == "serial"  # an hrlp task without the arm
+    assert TrainConfig(task="Reacher", backend="serial").resolved().backend == "serial"
+    with pytest.raises(ValueError, match=r"^backend batched steps hrlp's arm tasks; Pendulum-v1 is not one: use serial"):
+        TrainConfig(task="Pendulum-v1", backend="batched").resolved()
+    with pytest.raises(ValueError, match=r"^backend must be one of auto, batched, serial, got 'gpu'"):
+        TrainConfig(task="Reacher", backend="gpu")
+
+
+MANAGER = ["train-manager", "ReachAndGrip1", "--skills", "gripper,reacher", "--k", "3", "--handover", "--micro"]
+
+
+@pytest.mark.parametrize("command", [["train", "Reacher"], MANAGER], ids=["flat", "manager"])
+def test_the_batched_backend_trains_the_same_iteration_as_serial(tmp_path, command):
+    # World i of the BatchedArmEnv is environment i of the serial run (same seeds, same action noise; a Manager's skills
+    # act on the same rows); the rollout backend agrees with ArmEnv to about 1e-7 (tests/envs/test_batched.py), so the
+    # first iteration's figures agree.
+    rows = {}
+    for backend in ("serial", "batched"):
+        run = tmp_path / backend
+        r = CliRunner().invoke(app, [*command, *TINY, "--workers", "1", "--backend", backend, "--run-dir", str(run)])
+        assert r.exit_code == 0, r.output
+        assert _saved(run).backend == backend
+        rows[backend] = (run / "progress.csv").read_text().splitlines()
+    header = rows["serial"][0].split(",")
+    serial, batched = (dict(zip(header, rows[b][1].split(","), strict=True)) for b in ("serial", "batched"))
+    for key in ("return_mean", "episodes", "env_steps", "trpo/kl", "trpo/surrogate_after", "trpo/grad_norm"):
+        assert float(batched[key]) == pytest.approx(float(serial[key]), rel=1e-5, abs=1e-8), key
 
 
 def test_hrlp_workers_sets_the_count(monkeypatch):
@@ -126,7 +164,8 @@ def test_paper_settings_on_resume_are_compared_with_the_run(tmp_path):
 @pytest.mark.parametrize("command", ["train", "train-manager"])
 def test_the_help_names_what_paper_settings_sets(command):
     params = {p.name: p for p in typer.main.get_command(app).commands[command].params}  # type: ignore[attr-defined]
-    assert "--workers 1 --num-envs 16 --fisher-fraction 1 --value-iters 25 --value-fraction 1" in params["paper_settings"].help
+    expected = "--workers 1 --backend serial --num-envs 16 --fisher-fraction 1 --value-iters 25 --value-fraction 1"
+    assert expected in params["paper_settings"].help
 
 
 def test_a_batch_too_small_for_the_default_fractions_uses_every_state_with_a_note(tmp_path):

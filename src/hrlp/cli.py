@@ -554,7 +554,10 @@ _PAPER = Annotated[
     bool,
     typer.Option(
         help="The paper's settings, as every preset runs them, for the options among these left out: "
-        + " ".join(f"--{n.replace('_', '-')} {v:g}" for n, v in _PAPER_OPTIONS.items())
+        + " ".join(
+            f"--{n.replace('_', '-')} {v:g}" if isinstance(v, float) else f"--{n.replace('_', '-')} {v}"
+            for n, v in _PAPER_OPTIONS.items()
+        )
         + " (one process; the defaults sample on every core, with faster updates that learn as well: docs/benchmarks.md)."
     ),
 ]
@@ -978,6 +981,8 @@ def _task_args_accessor() -> tuple[Any, Any]:
 def _setting_accessor(setting: _Setting) -> tuple[Any, Any]:
     if (setting.config, setting.field) == (TrainConfig, "workers"):  # 0: the count this machine gives, compared as such
         return lambda c: c.workers, lambda c, v, p: dataclasses.replace(c, workers=v).resolved()
+    if (setting.config, setting.field) == (TrainConfig, "backend"):  # auto: the run's choice for its task
+        return lambda c: c.backend, lambda c, v, p: dataclasses.replace(c, backend=v).resolved()
     if setting.config is TrainConfig:
         return _replace_top(setting.field)
     return _replace_nested(_NESTED[setting.config], setting.field)

@@ -193,6 +193,12 @@ class TrainConfig:
     """Processes that sample at the same time, each stepping its share of the environments. Default 0: one per CPU core
     this process may use (or $HRLP_WORKERS), at most num_envs; 1: in this process (the paper's settings). A run records
     the number it used, and a resume keeps it."""
+    backend: str = "auto"
+    """How each process steps its environments: ``batched`` (the worlds of an hrlp arm task in one
+    :class:`~hrlp.envs.batched.BatchedArmEnv`, MuJoCo's rollout module, task arithmetic as arrays; a Manager's skills
+    act on every world at once), ``serial`` (one environment object each, the paper's settings: bit for bit the runs
+    made before the batched backend) or ``auto`` (the default: batched for an hrlp task, serial for a Gymnasium id).
+    A run records the one it used."""
     seed: int = 0
     """Seed of the environments, the network initialisation and the action noise."""
     episode_steps: int | None = None
@@ -232,6 +238,8 @@ class TrainConfig:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
         if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 0:
             raise ValueError(f"workers must be a positive integer (or 0: one per core), got {self.workers!r}")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
         if self.workers > self.num_envs:
             raise ValueError(f"workers ({self.workers}) must be at most num_envs ({self.num_envs})")
         if self.batch_steps < self.num_envs:
@@ -285,11 +293,18 @@ class TrainConfig:
             raise ValueError(problem)
 
     def resolved(self) -> TrainConfig:
-        """This config with a concrete number of sampling workers: ``workers`` 0 becomes :func:`auto_workers`'s count
-        for ``num_envs``; any other config is returned as it is. What a run records and resumes with."""
-        if self.workers != 0:
-            return self
-        return dataclasses.replace(self, workers=auto_workers(self.num_envs))
+        """This config with a concrete number of sampling workers and a concrete backend: ``workers`` 0 becomes
+        :func:`auto_workers`'s count for ``num_envs``, ``backend`` ``auto`` becomes :func:`auto_backend`'s choice; what a
+        run records and resumes with. Raises ValueError for ``batched`` where it does not apply."""
+        cfg = self
+        if cfg.workers == 0:
+            cfg = dataclasses.replace(cfg, workers=auto_workers(cfg.num_envs))
+        batchable = batchable_task(cfg.task)
+        if cfg.backend == "auto":
+            cfg = dataclasses.replace(cfg, backend="batched" if batchable else "serial")
+        elif cfg.backend == "batched" and not batchable:
+            raise ValueError(f"backend batched steps hrlp's arm tasks; {cfg.task} is not one: use serial or auto")
+        return cfg
 
     @property
     def steps_per_env(self) -> int:
@@ -329,6 +344,20 @@ class TrainConfig:
         return cls(**d)
 
 
+BACKENDS = ("auto", "batched", "serial")
+"""The values of :attr:`TrainConfig.backend`."""
+
+
+def batchable_task(task: str) -> bool:
+    """Whether ``task`` (a name or id) is an hrlp arm task, whose worlds the batched backend steps together, flat or
+    under a Manager (:data:`hrlp.envs.batched.VECTORISED`)."""
+    from hrlp.envs.batched import VECTORISED
+    from hrlp.envs.registry import TASKS
+
+    name = task.removeprefix("hrlp/").removesuffix("-v0")
+    return name in TASKS and TASKS[name].task_type in VECTORISED
+
+
 WORKERS_VARIABLE = "HRLP_WORKERS"
 """The environment variable that sets the number of sampling workers a run with ``workers`` 0 (the default) uses."""
 
@@ -352,15 +381,17 @@ def auto_workers(num_envs: int) -> int:
 
 PAPER_SETTINGS: dict[str, Any] = {
     "workers": 1,
+    "backend": "serial",
     "num_envs": 16,
     "trpo.fisher_fraction": 1.0,
     "value.max_iter": 25,
     "value.fraction": 1.0,
 }
 """The settings the paper's runs and every preset use where :class:`TrainConfig`'s defaults are faster: one process
-and 16 environments, exact Fisher-vector products, the baseline fitted by modular_rl's 25 L-BFGS iterations on every
-state. Names are those of :meth:`TrainConfig.to_json`, nested ones dotted (``trpo.fisher_fraction``); apply them with
-:func:`with_settings`. ``hrlp train --paper-settings`` sets the options they name that are left out."""
+and 16 environments, each its own environment object, exact Fisher-vector products, the baseline fitted by
+modular_rl's 25 L-BFGS iterations on every state. Names are those of :meth:`TrainConfig.to_json`, nested ones
+dotted (``trpo.fisher_fraction``); apply them with :func:`with_settings`. ``hrlp train --paper-settings`` sets the
+options they name that are left out."""
 
 
 def with_settings(config: TrainConfig, settings: dict[str, Any]) -> TrainConfig:

@@ -14,7 +14,9 @@ import numpy as np
 import torch
 from scipy import stats as sstats
 
+from hrlp.envs.vector import NO_SUCCESS_TEST, VectorStep
 from hrlp.rollout import Episode
+from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroVectorEnv
 
 
 @dataclass(frozen=True)
@@ -142,46 +144,58 @@ class ProgressLines:
             self._last = now
 
 
+EVAL_ENVS = 64
+"""Environments an evaluation steps together (one episode each, batched inference; fewer for fewer episodes)."""
+
+
 def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, deterministic: bool = True,
                  task_kwargs: dict[str, Any] | None = None,
                  on_progress: Callable[[EvalProgress], None] | None = None) -> Evaluation:  # fmt: skip
     """Run ``episodes`` episodes of the run's policy (normaliser frozen) and summarise them (``task_kwargs`` override
     the run's task arguments, e.g. to evaluate a skill from another start set).
 
-    Returns count the task's own rewards, undiscounted, over low-level steps, for flat policies and Managers alike.
-    ``on_progress``, if given, is called after every episode with the running :class:`EvalProgress` (the last call
-    has ``done == episodes``); :class:`ProgressLines` turns those calls into log lines.
+    Episode ``k`` starts from ``reset(seed=seed + k)``. The episodes run through the run's
+    :class:`~hrlp.envs.vector.VectorEnv` (its backend, :meth:`hrlp.train.TrainedPolicy.vector_env`), up to
+    :data:`EVAL_ENVS` at a time, each environment running one episode, with the policy's actions for all of them
+    computed at once. Returns count the task's own rewards, undiscounted, over low-level steps, for flat policies and
+    Managers alike. ``on_progress``, if given, is called after every episode with the running :class:`EvalProgress`
+    (the last call has ``done == episodes``); :class:`ProgressLines` turns those calls into log lines.
     """
     from hrlp.train import load_trained
 
     if episodes <= 0:
         raise ValueError(f"episodes must be a positive integer, got {episodes}")
     trained = load_trained(run_dir)
-    env = trained.make_env(**(task_kwargs or {}))
+    n = min(episodes, EVAL_ENVS)
+    env = trained.vector_env(n, **(task_kwargs or {}))
+    names = env.names if isinstance(env, MacroVectorEnv | BatchedMacroVectorEnv) else None
     gen = torch.Generator().manual_seed(seed)
     done_eps: list[Episode] = []
     usage: Counter[str] = Counter()
     moves: list[tuple[float, float, float]] = []  # (min d(C, T), max lift, untouched TargetDistSum) per episode
-    for k in range(episodes):
-        obs, info = env.reset(seed=seed + k)
-        start_gap = float(np.linalg.norm(obs[21:24] - obs[24:27])) if obs.shape[-1] >= 27 else math.nan
-        ret, length = 0.0, 0
-        while True:
-            obs, r, term, trunc, info = env.step(trained.act(env, obs, gen, deterministic))
-            ret += float(info.get("task_reward", r))
-            length += int(info.get("tau", 1))
-            if "macro" in info:
-                usage[info["macro"]] += 1
-            if term or trunc:
-                break
-        s, tds = info.get("success"), info.get("target_dist_sum")
-        if tds is not None and "closest_max" in info:
-            moves.append((-float(info["closest_max"]), float(info["lift_max"]), -length * start_gap))
-        done_eps.append(Episode(ret, length, None if s is None else bool(s), None if tds is None else float(tds)))
-        if on_progress is not None:
-            on_progress(_running(done_eps, episodes))
-    names = getattr(env, "names", None)
-    env.close()
+    try:
+        for first in range(0, episodes, n):
+            m = min(n, episodes - first)  # the environments whose first episode counts
+            obs = env.reset(seed=seed + first)
+            start_gap = np.linalg.norm(obs[:, 21:24] - obs[:, 24:27], axis=1) if obs.shape[1] >= 27 else None
+            ret, length = np.zeros(n), np.zeros(n, dtype=np.int64)
+            running = np.arange(n) < m
+            while running.any():
+                step = env.step(trained.act_rows(obs, gen, deterministic))
+                obs = step.obs
+                rewards = step.infos.get("task_reward", step.rewards)
+                ret[running] += rewards[running]
+                length[running] += step.tau[running]
+                if names is not None and "choice" in step.infos:
+                    usage.update(names[int(c)] for c in step.infos["choice"][running])
+                for i in np.flatnonzero(running & (step.terminated | step.truncated)):
+                    running[i] = False
+                    done_eps.append(_episode(step, i, float(ret[i]), int(length[i]), moves,
+                                             None if start_gap is None else float(start_gap[i])))  # fmt: skip
+                    if on_progress is not None:
+                        on_progress(_running(done_eps, episodes))
+    finally:
+        env.close()
     succ = [e.success for e in done_eps if e.success is not None]
     tds = [e.target_dist_sum for e in done_eps if e.target_dist_sum is not None]
     total = sum(usage.values())
@@ -193,6 +207,22 @@ def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, determin
         macro_usage={n: usage[n] / total for n in names} if names and total else None,
         move=_move_stats(moves, tds) if moves and len(moves) == len(tds) else None,
     )
+
+
+def _episode(step: VectorStep, i: int, ret: float, length: int, moves: list, start_gap: float | None) -> Episode:
+    """Environment ``i``'s episode that ended in ``step`` (a :class:`~hrlp.envs.vector.VectorStep`); appends its
+    reach-and-move figures to ``moves`` where the task reports them."""
+
+    def value(key: str) -> float | None:  # absent, or NaN (not reported on this step, e.g. a physics blow-up): None
+        v = float(step.infos[key][i]) if key in step.infos else math.nan
+        return None if math.isnan(v) else v
+
+    no_test = step.infos.get(NO_SUCCESS_TEST)
+    success = None if no_test is not None and no_test[i] else bool(step.success[i])
+    tds, closest, lift = value("target_dist_sum"), value("closest_max"), value("lift_max")
+    if tds is not None and closest is not None and lift is not None and start_gap is not None:
+        moves.append((-closest, lift, -length * start_gap))
+    return Episode(ret, length, success, tds)
 
 
 def evaluate_with_progress(run_dir: Path, episodes: int = 20, seed: int = 10_000, deterministic: bool = True,

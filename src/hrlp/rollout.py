@@ -26,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorEnv, VectorStep
+from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorConstructor, VectorEnv, VectorStep
 from hrlp.envs.vector import action_decoder as action_decoder  # re-exported: its home is hrlp.envs.vector
 from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
@@ -116,11 +116,22 @@ def vector_env(envs: Sequence[gym.Env], gamma: float | None = None) -> VectorEnv
     return SerialVectorEnv(envs, DEFAULT_GAMMA if gamma is None else gamma)
 
 
+def build_vector_env(env_fns: Sequence[Callable[[], gym.Env]], gamma: float | None = None) -> VectorEnv:
+    """The :class:`~hrlp.envs.vector.VectorEnv` of ``env_fns``: the constructor's own when every one is the same
+    :class:`~hrlp.envs.vector.VectorConstructor` (the batched backend of ``TrainConfig.backend``: a
+    :class:`~hrlp.envs.batched.BatchedArmEnv`, or a Manager's :class:`~hrlp.skills.macro_env.BatchedMacroVectorEnv`),
+    else :func:`vector_env` of the environments they build."""
+    first = env_fns[0]
+    if isinstance(first, VectorConstructor) and all(fn is first for fn in env_fns):
+        return first.vector(len(env_fns), DEFAULT_GAMMA if gamma is None else gamma)
+    return vector_env([fn() for fn in env_fns], gamma)
+
+
 class Sampler:
     """Steps ``N`` environments with batched policy inference, through one :class:`~hrlp.envs.vector.VectorEnv`.
 
     Args:
-        env_fns: one constructor per environment (stepped by :func:`vector_env`), or a ready VectorEnv (e.g. a
+        env_fns: one constructor per environment (stepped by :func:`build_vector_env`), or a ready VectorEnv (e.g. a
             :class:`~hrlp.envs.batched.BatchedArmEnv`), which the sampler then owns.
         policy: the policy; called once per step on ``[N, obs_dim]``.
         normalizer: observation normaliser. Its statistics stay fixed during a batch, so the policy and the value
@@ -155,7 +166,7 @@ class Sampler:
         elif not env_fns:
             raise ValueError("Sampler needs at least one environment")
         else:
-            self.vector_env = vector_env([fn() for fn in env_fns], gamma)
+            self.vector_env = build_vector_env(env_fns, gamma)
         self.policy = policy
         self.normalizer = normalizer
         self.generator = torch.Generator().manual_seed(seed)

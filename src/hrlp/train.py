@@ -41,10 +41,21 @@ from hrlp.checkpoint import (
     unpack_generators,
 )
 from hrlp.config import ALGOS, TrainConfig  # torch-free (for `hrlp --help`); importable from here as before
+from hrlp.envs.batched import BatchedFactory, make_batched
+from hrlp.envs.registry import ArmEnvFactory
+from hrlp.envs.vector import VectorConstructor, VectorEnv
 from hrlp.policies.mlp import GaussianPolicy, Policy, ValueNet, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.rollout import NonFiniteError, ParallelSampler, Sampler, action_decoder, first_non_finite, mean_or_nan
-from hrlp.skills.macro_env import MacroEnv, MacroSpec
+from hrlp.rollout import (
+    NonFiniteError,
+    ParallelSampler,
+    Sampler,
+    action_decoder,
+    build_vector_env,
+    first_non_finite,
+    mean_or_nan,
+)
+from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroSpec
 
 
 def env_factory(
@@ -58,7 +69,7 @@ def env_factory(
     parameters in [-1, 1] (:class:`hrlp.envs.actions.NormalisedParameters`).
     The constructor can be pickled (sampler worker processes rebuild it; a Manager's skills are then loaded again
     there, from the same files)."""
-    from hrlp.envs import TASKS, make
+    from hrlp.envs import TASKS
     from hrlp.envs.actions import is_parameterised, make_normalised
     from hrlp.envs.check import gym_kwargs, probe_task
 
@@ -71,7 +82,7 @@ def env_factory(
         if episode_steps is not None:
             kw["episode_steps"] = episode_steps
         if macro is None:
-            return functools.partial(make, name, **kw)
+            return ArmEnvFactory(name, kw)
         return _MacroFactory(name, kw, macro, gamma, macro.load_skills())
     if is_parameterised(action_space):  # the policy acts in [-1, 1] per bounded parameter (hrlp.envs.actions)
         return functools.partial(make_normalised, task, **gym_kwargs(task, episode_steps, kwargs))
@@ -98,6 +109,27 @@ class _MacroFactory:
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_skills": None}
+
+
+class _BatchedMacroFactory(_MacroFactory, VectorConstructor):
+    """A Manager's environment constructor whose ``n`` copies a sampler steps as one
+    :class:`~hrlp.skills.macro_env.BatchedMacroVectorEnv` (the batched backend)."""
+
+    def vector(self, n: int, gamma: float) -> VectorEnv:
+        if gamma != self.gamma:
+            raise ValueError(f"the Manager's environments discount by {self.gamma}, not {gamma}")
+        return BatchedMacroVectorEnv(make_batched(self.name, n, **self.kwargs), self())
+
+
+def batched_factory(factory: Callable[[], gym.Env]) -> VectorConstructor:
+    """The batched backend's version of :func:`env_factory`'s constructor of an hrlp arm task (flat or a Manager's):
+    the same environment built alone, and ``n`` of them stepped as one (:class:`~hrlp.envs.vector.VectorConstructor`).
+    Raises ValueError for any other constructor."""
+    if isinstance(factory, _MacroFactory):
+        return _BatchedMacroFactory(factory.name, factory.kwargs, factory.macro, factory.gamma, factory._skills)
+    if isinstance(factory, ArmEnvFactory):
+        return BatchedFactory(factory.name, factory.kwargs)
+    raise ValueError("the batched backend steps hrlp's arm tasks only")
 
 
 def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) -> None:
@@ -133,6 +165,8 @@ class Trainer:
     def __init__(self, cfg: TrainConfig) -> None:
         self.cfg = cfg = cfg.resolved()
         factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **cfg.task_kwargs)
+        if cfg.backend == "batched":  # every world of a process's share in one BatchedArmEnv (hrlp.rollout.build_vector_env)
+            factory = batched_factory(factory)
         torch.manual_seed(cfg.seed)
         probe = factory()
         obs_dim = int(np.prod(probe.observation_space.shape))
@@ -399,6 +433,20 @@ class TrainedPolicy:
         task_kwargs = {k: v for k, v in cfg.task_kwargs.items() if k not in TRAINING_ONLY_TASK_ARGS}
         return env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **{**task_kwargs, **kwargs})()
 
+    def vector_env(self, n: int, **kwargs: Any) -> VectorEnv:
+        """``n`` environments of the run as one :class:`~hrlp.envs.vector.VectorEnv`, stepped by the run's backend
+        (environment ``i`` as :meth:`make_env`'s); ``kwargs`` go to the task, as for :meth:`make_env`."""
+        cfg = self.config
+        task_kwargs = {k: v for k, v in cfg.task_kwargs.items() if k not in TRAINING_ONLY_TASK_ARGS}
+        factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **{**task_kwargs, **kwargs})
+        if cfg.backend == "batched":
+            factory = batched_factory(factory)
+        return build_vector_env([factory] * n, cfg.advantage.gamma)
+
+    def act_rows(self, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> np.ndarray:
+        """Flat action rows ``[N, act_dim]`` for raw observations ``[N, obs_dim]`` (what a VectorEnv steps)."""
+        return self.policy.act_numpy(self.normalizer(obs, update=False).astype(np.float32), generator, deterministic)
+
     def act(self, env: gym.Env, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> Any:
         """The action for one raw observation, in ``env``'s action space (clipped / a parameterised tuple)."""
         a = self.policy.act_numpy(self.normalizer(obs, update=False)[None].astype(np.float32), generator, deterministic)
@@ -593,7 +641,8 @@ def train(
     """Train, yielding each iteration's statistics; writes logs, a checkpoint per iteration, and ``config.json``.
 
     With ``resume``, continue from ``run_dir/checkpoint`` (its config must equal ``cfg`` except the budgets ``steps``
-    and ``episodes``, which may grow, and ``workers`` 0 in ``cfg``, which takes the run's own count; a difference raises
+    and ``episodes``, which may grow, ``workers`` 0 in ``cfg``, which takes the run's own count, and ``backend`` ``auto``,
+    which takes the run's own backend; a difference raises
     ValueError naming every differing setting); log rows written
     after that checkpoint are dropped so the log matches the restored state. Without it, a directory that holds a
     checkpoint -- or only the ``.old`` copy a kill between a save's renames leaves
@@ -628,6 +677,8 @@ def train(
             if resume:
                 if cfg.workers == 0:  # left to the machine: the run continues with the count it was trained with
                     cfg = replace(cfg, workers=trainer.cfg.workers)
+                if cfg.backend == "auto":  # likewise: the run continues with the backend it was trained with
+                    cfg = replace(cfg, backend=trainer.cfg.backend)
                 differences = config_differences(trainer.cfg, cfg, ignore=("steps", "episodes"))
                 if differences:
                     raise ValueError(f"{run_dir}: --resume needs the run's own settings (only --steps and --episodes "

@@ -41,6 +41,7 @@ SET = {
     (TrainConfig, "batch_steps"): (("--batch-steps", "20"), 20),
     (TrainConfig, "num_envs"): (("--num-envs", "4"), 4),
     (TrainConfig, "workers"): (("--workers", "2"), 2),
+    (TrainConfig, "backend"): (("--backend", "serial"), "serial"),
     (TrainConfig, "seed"): (("--seed", "3"), 3),
     (TrainConfig, "episode_steps"): (("--episode-steps", "10"), 10),
     (TrainConfig, "hidden"): (("--hidden", "16,8"), (16, 8)),

@@ -3,7 +3,8 @@
 (a) SerialVectorEnv against its environments stepped by hand (Box, Discrete and parameterised actions); (b)
 BatchedArmEnv's loop backend against SerialVectorEnv bit for bit, its rollout backend within 1e-6 (it restarts the
 constraint solver's warm start every control step, tests/envs/test_batched.py); (c) MacroVectorEnv against each
-MacroEnv stepped alone with ``env.step``; (d) the Sampler over each of them, and against a per-environment loop
+MacroEnv stepped alone with ``env.step``, and BatchedMacroVectorEnv (the Manager over a BatchedArmEnv) against
+MacroVectorEnv, bit for bit over the loop backend; (d) the Sampler over each of them, and against a per-environment loop
 (``env.step`` one environment at a time, as the sampler did before it stepped a VectorEnv), for a fixed policy and
 seed. Batched skill inference evaluates a skill on ``[M, 24]`` rows where a lone MacroEnv evaluates it on one, and a
 matrix product may round differently: with skills the numbers agree to 1e-7, the flags and taus exactly; the
@@ -30,7 +31,7 @@ from hrlp.policies.mlp import policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import Batch, Episode, Sampler, vector_env
 from hrlp.skills.library import load_skill
-from hrlp.skills.macro_env import MacroEnv, MacroVectorEnv, MicroAction
+from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv, MicroAction
 
 TASK, N, EPISODE = "ReachAndGrip2", 3, 12
 LOOSE = {"tr1": 0.3, "tr2": 0.06}  # success within reach of random torques, so the success flags are compared both ways
@@ -198,6 +199,42 @@ def test_macro_vector_env_refuses_environments_of_different_managers(skills):
     with pytest.raises(ValueError, match="mix MacroEnvs and other environments"):
         vector_env([_Managers(None)(), _arm()()])
     assert isinstance(MacroVectorEnv([_Managers(None)()]), VectorEnv)
+
+
+def _batched_managers(build: _Managers, backend: str) -> BatchedMacroVectorEnv:
+    return BatchedMacroVectorEnv(make_batched(TASK, N, episode_steps=EPISODE, backend=backend, **LOOSE), build())
+
+
+@pytest.mark.parametrize("backend", ["loop", "rollout"])
+@pytest.mark.parametrize("kind", ["skills", "micro"])
+def test_batched_macro_vector_env_gives_the_macro_vector_envs_episodes(skills, kind, backend):
+    # The same skills on the same rows [M, 24] at every low-level step, the physics of all worlds in one call: with the
+    # loop backend the same bits; with rollout within its agreement with ArmEnv.
+    build = _Managers(skills if kind == "skills" else None)
+    actions = _manager_actions(build(), 14)
+    ref_obs, ref = _run(MacroVectorEnv([build() for _ in range(N)]), actions)
+    obs, got = _run(_batched_managers(build, backend), actions)
+    np.testing.assert_array_equal(obs, ref_obs)
+    _same_steps(ref, got, 0.0 if backend == "loop" else ROLLOUT_ATOL)
+    assert sum(int(s.truncated.sum()) for s in ref) >= N and len({int(t) for s in ref for t in s.tau}) > 1
+
+
+def test_a_managers_state_continues_from_one_vector_env_in_the_other(skills):
+    build = _Managers(skills)
+    actions = _manager_actions(build(), 10)
+    serial, batched = MacroVectorEnv([build() for _ in range(N)]), _batched_managers(build, "loop")
+    _run(serial, actions[:5])
+    _run(batched, actions[:5], seed=99)  # elsewhere, until it takes the serial one's state
+    batched.set_state(json.loads(json.dumps(serial.get_state())))
+    _same_steps([serial.step(a) for a in actions[5:]], [batched.step(a) for a in actions[5:]])
+    assert json.loads(json.dumps(batched.get_state())) == json.loads(json.dumps(serial.get_state()))
+
+
+def test_a_batched_manager_refuses_worlds_of_another_task(skills):
+    worlds = make_batched("Reacher", N, episode_steps=EPISODE)
+    with pytest.raises(ValueError, match="the worlds run ReacherTask, the layout's macro-actions ReachAndGripTask"):
+        BatchedMacroVectorEnv(worlds, _Managers(skills)())
+    assert isinstance(_batched_managers(_Managers(None), "loop"), VectorEnv)
 
 
 # --- (d) the sampler over each ----------------------------------------------------------------------------------------

@@ -49,7 +49,7 @@ import mujoco.rollout
 import numpy as np
 
 from hrlp.envs.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, ArmPhysics, PhysicsConfig, model_xml
-from hrlp.envs.registry import TASKS
+from hrlp.envs.registry import TASKS, ArmEnvFactory
 from hrlp.envs.tasks import (
     GripperTask,
     GripReward,
@@ -60,7 +60,7 @@ from hrlp.envs.tasks import (
     SparseSuccess,
     Task,
 )
-from hrlp.envs.vector import VectorStep, check_actions, check_gamma, check_num_envs
+from hrlp.envs.vector import VectorConstructor, VectorStep, check_actions, check_gamma, check_num_envs
 
 #: Physics backends of :class:`BatchedArmEnv`; the first is the default (measured faster: docs/benchmarks.md).
 BACKENDS = ("rollout", "loop")
@@ -311,9 +311,10 @@ class _Backend(Protocol):
     """Steps ``N`` worlds; the environment owns the ``state [N, nfull]`` (FULLPHYSICS), ``sens [N, 18]`` and
     ``mocap [N, 7]`` buffers and hands a world's full state over through a scratch ``MjData``."""
 
-    def step(self, ctrl: np.ndarray, state: np.ndarray, sens: np.ndarray) -> tuple[np.ndarray, float]:
-        """Apply ``ctrl [N, nu]`` for ``substeps`` physics steps; write ``state``, ``sens``; return
-        ``(unstable [N] bool, seconds inside MuJoCo)``."""
+    def step(self, ctrl: np.ndarray, state: np.ndarray, sens: np.ndarray, idx: np.ndarray | None = None
+             ) -> tuple[np.ndarray, float]:  # fmt: skip
+        """Apply ``ctrl [N, nu]`` for ``substeps`` physics steps in every world, or in the worlds ``idx`` only (the
+        others keep their state); write ``state``, ``sens``; return ``(unstable [N] bool, seconds inside MuJoCo)``."""
         ...
 
     def load(self, i: int, src: mujoco.MjData) -> None:
@@ -338,11 +339,13 @@ class _LoopBackend:
         self._counters = [tuple(d.warning[int(k)] for k in _BAD) for d in self.datas]
         self._buf = np.empty(mujoco.mj_stateSize(model, _INTEGRATION))
 
-    def step(self, ctrl: np.ndarray, state: np.ndarray, sens: np.ndarray) -> tuple[np.ndarray, float]:
-        m, nsub, clock = self.model, self.substeps, time.perf_counter
+    def step(self, ctrl: np.ndarray, state: np.ndarray, sens: np.ndarray, idx: np.ndarray | None = None
+             ) -> tuple[np.ndarray, float]:  # fmt: skip
+        m, nsub, clock = self.model, self.substeps, time.thread_time  # CPU time, as ArmPhysics counts it
         unstable = np.zeros(len(self.datas), dtype=bool)
         seconds = 0.0
-        for i, d in enumerate(self.datas):
+        for i in range(len(self.datas)) if idx is None else idx:
+            d = self.datas[i]
             d.ctrl[:] = ctrl[i]
             t0 = clock()
             mujoco.mj_step(m, d, nsub)
@@ -386,23 +389,47 @@ class _RolloutBackend:
         self._out_sens = np.empty((n, substeps, model.nsensordata))
         # A few chunks per thread balance worlds that cost more (contacts) against the pool's overhead.
         self._chunk = max(1, n // (4 * threads)) if threads > 1 else None
+        self._threads = threads
+        # On the calling thread, CPU time (as ArmPhysics counts it); on a pool, the wall time of the call.
+        self._clock = time.thread_time if threads == 1 else time.perf_counter
 
-    def step(self, ctrl: np.ndarray, state: np.ndarray, sens: np.ndarray) -> tuple[np.ndarray, float]:
-        self._ctrl[:] = ctrl
-        self._ctrl_steps[:] = ctrl[:, None, :]
+    def step(self, ctrl: np.ndarray, state: np.ndarray, sens: np.ndarray, idx: np.ndarray | None = None
+             ) -> tuple[np.ndarray, float]:  # fmt: skip
+        if idx is None or len(idx) == len(self._models):
+            self._ctrl[:] = ctrl
+            self._ctrl_steps[:] = ctrl[:, None, :]
+            unstable, seconds = self._run(self._models, state, self._ctrl_steps, self._warm, self._out_state,
+                                          self._out_sens, self._chunk)  # fmt: skip
+            state[:] = self._out_state[:, -1]
+            sens[:] = self._out_sens[:, -1]
+            self._warm[:] = 0.0  # the solver's warm start is not among rollout's outputs: the next call starts from zero
+            return unstable, seconds
+        # Some worlds only (a Manager's macro-actions of different lengths): the same call on their rows.
+        m, k = len(idx), self._threads
+        self._ctrl[idx] = ctrl[idx]
+        out_state = np.empty((m, self.substeps, self._out_state.shape[2]))
+        out_sens = np.empty((m, self.substeps, self._out_sens.shape[2]))
+        some, seconds = self._run(self._models[:m], state[idx], np.repeat(ctrl[idx, None, :], self.substeps, axis=1),
+                                  self._warm[idx], out_state, out_sens, max(1, m // (4 * k)) if k > 1 else None)  # fmt: skip
+        state[idx] = out_state[:, -1]
+        sens[idx] = out_sens[:, -1]
+        self._warm[idx] = 0.0
+        unstable = np.zeros(len(self._models), dtype=bool)
+        unstable[idx] = some
+        return unstable, seconds
+
+    def _run(self, models: list, state: np.ndarray, ctrl: np.ndarray, warm: np.ndarray, out_state: np.ndarray,
+             out_sens: np.ndarray, chunk: int | None) -> tuple[np.ndarray, float]:  # fmt: skip
+        """One ``rollout`` call from ``state [M, nfull]``; ``(unstable [M], seconds)``."""
         before = state[:, 0].copy() if self.substeps == 1 else None
-        t0 = time.perf_counter()
-        self._pool.rollout(self._models, self._datas, state, self._ctrl_steps, skip_checks=True, nstep=self.substeps,
-                           initial_warmstart=self._warm, state=self._out_state, sensordata=self._out_sens,
-                           chunk_size=self._chunk)  # fmt: skip
-        seconds = time.perf_counter() - t0
+        t0 = self._clock()
+        self._pool.rollout(models, self._datas, state, ctrl, skip_checks=True, nstep=self.substeps,
+                           initial_warmstart=warm, state=out_state, sensordata=out_sens, chunk_size=chunk)  # fmt: skip
+        seconds = self._clock() - t0
         # A good last substep adds one timestep to the clock (mj_step's own addition, so the same bits). MuJoCo's
         # reset after a bad state sets the clock to 0, and rollout then repeats that state for the remaining substeps.
-        last = self._out_state[:, -1, 0]
-        unstable = last != (before if before is not None else self._out_state[:, -2, 0]) + self.model.opt.timestep
-        state[:] = self._out_state[:, -1]
-        sens[:] = self._out_sens[:, -1]
-        self._warm[:] = 0.0  # the solver's warm start is not among rollout's outputs: the next call starts from zero
+        last = out_state[:, -1, 0]
+        unstable = last != (before if before is not None else out_state[:, -2, 0]) + self.model.opt.timestep
         return unstable, seconds
 
     def load(self, i: int, src: mujoco.MjData) -> None:
@@ -427,21 +454,22 @@ class _RolloutBackend:
 class BatchedArmEnv:
     """``n`` worlds of one arm task stepped together: a :class:`~hrlp.envs.vector.VectorEnv`.
 
-    Args:
-        task: the task (one of :data:`VECTORISED`'s types); copied, so the caller's object keeps its own episode state.
-        n: the number of worlds N.
-        episode_steps: steps before truncation, as :class:`~hrlp.envs.arm_env.ArmEnv`'s.
-        physics: timestep, substeps and gravity.
-        gamma: the discount per step (``VectorStep.discount``).
-        backend: ``"rollout"`` (MuJoCo's rollout module) or ``"loop"`` (``mj_step`` per world from Python).
-        threads: threads of the rollout backend (1: the calling thread); the loop backend takes 1 only.
+        Args:
+            task: the task (one of :data:`VECTORISED`'s types); copied, so the caller's object keeps its own episode state.
+            n: the number of worlds N.
+            episode_steps: steps before truncation, as :class:`~hrlp.envs.arm_env.ArmEnv`'s.
+            physics: timestep, substeps and gravity.
+            gamma: the discount per step (``VectorStep.discount``).
+            backend: ``"rollout"`` (MuJoCo's rollout module) or ``"loop"`` (``mj_step`` per world from Python).
+            threads: threads of the rollout backend (1: the calling thread); the loop backend takes 1 only.
 
-    World ``i`` behaves as an ArmEnv of the same task reset with ``seed + i`` and stepped with row ``i`` of the
-    actions, reset on truncation (bit for bit with ``backend="loop"``). ``infos`` carries ``reward_<term>``,
-    ``<tracked>_sum``, ``<tracked>_max`` (NaN on an unstable step, which ArmEnv does not report them on) and
-    ``physics_unstable``; ``physics_seconds`` is the wall time of the backend's C calls. :meth:`get_state` gives
-    a list of ArmEnv states (``ArmEnv.set_state`` and :class:`~hrlp.envs.vector.SerialVectorEnv` take them, and
-    this class takes theirs).
+        World ``i`` behaves as an ArmEnv of the same task reset with ``seed + i`` and stepped with row ``i`` of the
+        actions, reset on truncation (bit for bit with ``backend="loop"``). ``infos`` carries ``reward_<term>``,
+        ``<tracked>_sum``, ``<tracked>_max`` (NaN on an unstable step, which ArmEnv does not report them on) and
+        ``physics_unstable``; ``physics_seconds`` is the CPU time of the backend's C calls on the calling thread (as ArmEnv
+    counts its ``mj_step``), or with ``threads`` > 1 their wall time. :meth:`get_state` gives
+        a list of ArmEnv states (``ArmEnv.set_state`` and :class:`~hrlp.envs.vector.SerialVectorEnv` take them, and
+        this class takes theirs).
     """
 
     def __init__(
@@ -492,6 +520,7 @@ class BatchedArmEnv:
         self._measure = self._measurement_views()
         self._obs = np.zeros((n, self._obs_dim))
         self._t = np.zeros(n, dtype=np.int64)
+        self._ended = np.zeros(n, dtype=bool)  # episode over, waiting for reset_worlds (advance only)
         self._episodes = np.zeros(n, dtype=np.int64)
         self._success = np.zeros(n, dtype=bool)
         self._sums = np.zeros((n, len(self.task.tracked)))
@@ -532,10 +561,26 @@ class BatchedArmEnv:
 
     def step(self, actions: np.ndarray) -> VectorStep:
         """Apply ``actions [N, 9]`` (torques in [-1, 1], clipped by MuJoCo) for one control period in every world."""
+        step = self.advance(actions)
+        for i in np.flatnonzero(step.truncated):
+            self._reset_world(i)
+        step.obs[:] = self._obs
+        return step
+
+    def advance(self, actions: np.ndarray, active: np.ndarray | None = None) -> VectorStep:
+        """:meth:`step` without its resets, in the worlds where ``active [N]`` (bool; None: every world): a world
+        whose episode ends here waits, ``obs`` its last observation, until :meth:`reset_worlds` starts its next one
+        (stepping it before raises RuntimeError). Rows of worlds not active hold their current observation, reward 0
+        and no flags; their ``infos`` are not meaningful. A Manager's macro-actions of different lengths step this way
+        (:class:`~hrlp.skills.macro_env.BatchedMacroVectorEnv`)."""
         if not self._ready:
             raise RuntimeError(f"{self._who}: call reset() before step()")
         a = check_actions(actions, self._n, N_JOINTS, self._who)
-        unstable, seconds = self._backend.step(a, self._state, self._sens)
+        idx = None if active is None else np.flatnonzero(active)
+        if (self._ended if idx is None else self._ended[idx]).any():
+            ended = np.flatnonzero(self._ended)
+            raise RuntimeError(f"{self._who}: world(s) {ended.tolist()} ended their episode; reset_worlds() them first")
+        unstable, seconds = self._backend.step(a, self._state, self._sens, idx)
         m = self._measure()
         terms, ok = self._vec.evaluate(m, self._ep)
         rewards = np.zeros(self._n)
@@ -550,8 +595,8 @@ class BatchedArmEnv:
             maxes = np.where(now > self._maxes, now, self._maxes)  # Python's max(old, new) keeps old on ties and NaN
         else:
             maxes = self._maxes
-        self._t += 1
-        truncated = self._t >= self.episode_steps
+        t = self._t + 1 if idx is None else self._t + np.asarray(active, dtype=np.int64)
+        truncated = t >= self.episode_steps
         tracked = {f"{k}_sum": sums[:, j] for j, k in enumerate(self.task.tracked)}
         tracked |= {f"{k}_max": maxes[:, j] for j, k in enumerate(self.task.tracked_max)}
         if unstable.any():  # as ArmEnv._unstable: the last good observation, reward 0, nothing else counted
@@ -561,26 +606,38 @@ class BatchedArmEnv:
             sums, maxes = np.where(u[:, None], self._sums, sums), np.where(u[:, None], self._maxes, maxes)
             tracked = {k: np.where(u, np.nan, v) for k, v in tracked.items()}
             truncated |= u
+        if idx is not None:  # the worlds left out keep everything
+            rest = ~np.asarray(active, dtype=bool)
+            next_obs[rest], rewards[rest], success[rest], truncated[rest] = self._obs[rest], 0.0, self._success[rest], False
+            sums[rest], maxes[rest] = self._sums[rest], self._maxes[rest]
+        self._t, self._ended = t, truncated.copy()
         self._success, self._sums, self._maxes = success, sums, maxes
         infos: dict[str, np.ndarray] = {f"reward_{k}": np.array(v, dtype=np.float64) for k, v in terms.items()}
         infos |= {k: v.copy() for k, v in tracked.items()}
         infos["physics_unstable"] = unstable
-        step_success = success.copy()  # before the resets below restart some worlds' flags
         self._obs = next_obs.copy()
-        for i in np.flatnonzero(truncated):
-            self._reset_world(i)
         return VectorStep(
-            obs=self._obs.copy(),
+            obs=next_obs.copy(),
             next_obs=next_obs,
             rewards=rewards,
             discount=np.full(self._n, self.gamma),
             tau=np.ones(self._n, dtype=np.int64),
             terminated=np.zeros(self._n, dtype=bool),
             truncated=truncated,
-            success=step_success,
+            success=success.copy(),
             infos=infos,
             physics_seconds=seconds,
         )
+
+    def reset_worlds(self, worlds: np.ndarray) -> np.ndarray:
+        """Start the next episode of each world in ``worlds`` (indices), continuing its own random stream, as
+        :meth:`step` does when an episode ends; returns their observations ``[len(worlds), obs_dim]``."""
+        if not self._ready:
+            raise RuntimeError(f"{self._who}: call reset() before reset_worlds()")
+        rows = np.asarray(worlds, dtype=np.int64).reshape(-1)
+        for i in rows:
+            self._reset_world(int(i))
+        return self._obs[rows].copy()
 
     def get_state(self) -> dict[str, Any]:
         """``{"envs": [one ArmEnv.get_state() per world], "obs": [N, obs_dim]}`` (JSON-serialisable)."""
@@ -644,6 +701,7 @@ class BatchedArmEnv:
         p.forward()
         self._episodes[i] += 1
         self._t[i] = 0
+        self._ended[i] = False
         self._success[i] = task.success(p)
         self._sums[i] = 0.0
         self._maxes[i] = [float(v) for v in task.track_max(p)]
@@ -674,7 +732,7 @@ class BatchedArmEnv:
             "success": bool(self._success[i]),
             "sums": self._sums[i].tolist(),
             "maxes": self._maxes[i].tolist(),
-            "needs_reset": False,
+            "needs_reset": bool(self._ended[i]),
             "rng": self._rngs[i].bit_generator.state,
             "task": {k: v[i].tolist() for k, v in self._ep.items()},
         }
@@ -687,6 +745,7 @@ class BatchedArmEnv:
         self._load_physics(i, phys)
         self._obs[i] = s["obs"]
         self._t[i], self._episodes[i], self._success[i] = int(s["t"]), int(s["episodes"]), bool(s["success"])
+        self._ended[i] = False
         self._sums[i] = s["sums"]
         if "maxes" in s:
             self._maxes[i] = s["maxes"]
@@ -719,12 +778,24 @@ def make_batched(name: str, n: int, **kwargs: Any) -> BatchedArmEnv:
     return BatchedArmEnv(TASKS[name].build(**kwargs), n, **env_kw)
 
 
+@dataclass(frozen=True, eq=False)
+class BatchedFactory(ArmEnvFactory, VectorConstructor):
+    """An :class:`~hrlp.envs.registry.ArmEnvFactory` that can also build ``n`` worlds of its task as one
+    :class:`BatchedArmEnv` (:meth:`vector`). A sampler given ``n`` copies of one such factory steps them as one
+    BatchedArmEnv (:func:`hrlp.rollout.build_vector_env`): the batched backend of ``TrainConfig.backend``."""
+
+    def vector(self, n: int, gamma: float) -> BatchedArmEnv:
+        """``n`` worlds (world ``i`` as the ``i``-th of ``n`` environments this factory builds), discounting by ``gamma``."""
+        return make_batched(self.name, n, gamma=gamma, **self.kwargs)
+
+
 __all__ = [
     "BACKENDS",
     "DEFAULT_BACKEND",
     "SENSORS",
     "VECTORISED",
     "BatchedArmEnv",
+    "BatchedFactory",
     "Measurements",
     "VectorisedTask",
     "capsule_pose_rows",

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -51,6 +51,11 @@ class TaskSpec:
     def arguments(self) -> tuple[str, ...]:
         """The task's own arguments (``--task-arg NAME=VALUE``), e.g. ``c1``, ``tr`` for a gripping task."""
         return self.build.arguments() if isinstance(self.build, _Build) else ()
+
+    @property
+    def task_type(self) -> type | None:
+        """The task's class (None for a build function that does not say)."""
+        return self.build.cls if isinstance(self.build, _Build) else None
 
 
 @dataclass(frozen=True, eq=False)  # compared and hashed by identity, as the functions it replaces
@@ -139,6 +144,18 @@ def make(name: str, **kwargs: Any) -> ArmEnv:
     except TypeError as e:  # a value of the wrong type reaches a task's arithmetic
         raise ValueError(f"{name}: invalid argument ({e})") from None
     return ArmEnv(task, **env_kw)
+
+
+@dataclass(frozen=True, eq=False)
+class ArmEnvFactory:
+    """A picklable constructor of the registered task ``name`` with ``kwargs``: ``factory()`` is
+    ``make(name, **kwargs)``."""
+
+    name: str
+    kwargs: Mapping[str, Any] = field(default_factory=dict)
+
+    def __call__(self) -> ArmEnv:
+        return make(self.name, **self.kwargs)
 
 
 def register_all() -> None:

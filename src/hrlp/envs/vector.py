@@ -65,6 +65,16 @@ class VectorStep:
         return self.terminated | self.truncated
 
 
+class VectorConstructor:
+    """Base of an environment constructor that can also build ``n`` of its environments as one :class:`VectorEnv`
+    (:meth:`vector`); a sampler given ``n`` copies of one such constructor steps them that way
+    (:func:`hrlp.rollout.build_vector_env`)."""
+
+    def vector(self, n: int, gamma: float) -> VectorEnv:
+        """``n`` environments (the ``i``-th as the ``i``-th built one by one), discounting a low-level step by ``gamma``."""
+        raise NotImplementedError
+
+
 @runtime_checkable
 class VectorEnv(Protocol):
     """``N`` environments stepped together, auto-resetting in the same step (see the module docstring)."""

@@ -22,6 +22,7 @@ one the sampler steps a Manager's environments through.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -30,6 +31,7 @@ import gymnasium as gym
 import numpy as np
 
 from hrlp.envs.arm_env import ArmEnv
+from hrlp.envs.batched import BatchedArmEnv
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
 from hrlp.envs.vector import VectorStep, check_num_envs, info_arrays, physics_seconds
 from hrlp.skills.skill import HANDOVER_POINT, POINT_TASKS, Skill
@@ -233,8 +235,35 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     environments running it, and an environment whose macro-action has ended (its duration, or its episode)
     waits. Raises ValueError for a wrong shape, NaN/inf, or a choice that is not one of the macro-actions.
     """
-    first = envs[0]
-    n, width = len(envs), 1 + int(first.offsets[-1])
+    infos: list[dict[str, Any]] = [{} for _ in envs]
+
+    def step(running: np.ndarray, torques: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        rows = []
+        for i, t in zip(running, torques, strict=True):
+            env = envs[i]
+            rows.append(env.env.step(t))
+            infos[i] = rows[-1][4]
+            if env.on_substep is not None:
+                env.on_substep(env.names[int(actions[i][0])])  # a valid choice: decide() checked it
+        obs, r, term, trunc, _ = zip(*rows, strict=True)
+        return np.stack(obs), np.array(r, dtype=np.float64), np.array(term, dtype=bool), np.array(trunc, dtype=bool)
+
+    _, res = decide(envs[0], np.stack([e._obs for e in envs]), actions, step)
+    for e, o in zip(envs, res.obs, strict=True):
+        e._obs = o.copy()
+    return dataclasses.replace(res, infos=infos)
+
+
+def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
+           step: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+           ) -> tuple[np.ndarray, MacroStep]:  # fmt: skip
+    """One Manager decision in ``N`` worlds from ``obs [N, obs_dim]``: the macro-action logic of :func:`step_macros`,
+    over any low-level stepper. ``layout`` gives the macro-actions (skills, durations, parameter blocks, hand-over,
+    gamma); ``step(running, torques)`` applies ``torques [M, 9]`` to the worlds ``running`` (indices) for one control
+    step and returns their ``(obs [M, obs_dim], rewards [M], terminated [M], truncated [M])``. Returns the choices and
+    the :class:`MacroStep` (``infos`` empty: the stepper keeps them)."""
+    first = layout
+    n, width = len(obs), 1 + int(first.offsets[-1])
     a = np.asarray(actions, dtype=np.float64)
     if a.shape != (n, width):
         raise ValueError(f"Manager actions must have shape ({n}, {width}) (choice + parameter blocks), got {a.shape}")
@@ -245,7 +274,7 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
         raise ValueError(f"Manager choices must be integers in [0, {len(first.names)}), got {a[:, 0].tolist()}")
     params = first._centre + first._half * np.clip(a[:, 1:], -1.0, 1.0)
     durations = first.durations[choice]
-    obs = np.stack([e._obs for e in envs])
+    obs = np.array(obs, dtype=np.float64)
     for s, spec in enumerate(first.param_specs):  # parameters relative to a body: add its position at the start
         if spec.frame != "world":
             params[:, first.offsets[s] : first.offsets[s + 1]] += spec.origin(obs)
@@ -253,7 +282,6 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     rewards, task_reward = np.zeros(n), np.zeros(n)
     discount, tau = np.ones(n), np.zeros(n, dtype=np.int64)
     terminated, truncated = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
-    infos: list[dict[str, Any]] = [{} for _ in range(n)]
     torques = np.zeros((n, N_JOINTS))
     active = np.ones(n, dtype=bool)
     offsets, n_skills = first.offsets, len(first.skills)
@@ -277,22 +305,17 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
             torques[idx] = first.skills[s].act(obs[idx, :BASE_OBS_DIM], block)
             if h is not None and h.open_torque > 0:
                 torques[idx, N_JOINTS - 2 :] = (-h.open_torque, h.open_torque)
-        for i in running:
-            env = envs[i]
-            obs[i], r, term, trunc, infos[i] = env.env.step(torques[i])
-            rewards[i] += discount[i] * r
-            task_reward[i] += r
-            discount[i] *= env.gamma
-            tau[i] += 1
-            if env.on_substep is not None:
-                env.on_substep(env.names[choice[i]])
-            if term or trunc:
-                terminated[i], truncated[i], active[i] = term, trunc and not term, False
+        obs[running], r, term, trunc = step(running, torques[running])
+        rewards[running] += discount[running] * r
+        task_reward[running] += r
+        discount[running] *= first.gamma
+        tau[running] += 1
+        ended = term | trunc
+        terminated[running], truncated[running] = term, trunc & ~term
+        active[running[ended]] = False
     if first.micro is not None and first.micro.penalty:
         rewards[choice == n_skills] -= first.micro.penalty
-    for e, o in zip(envs, obs, strict=True):
-        e._obs = o.copy()
-    return MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, infos)
+    return choice, MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, [])
 
 
 class MacroVectorEnv:
@@ -333,6 +356,11 @@ class MacroVectorEnv:
     def num_envs(self) -> int:
         """N."""
         return len(self.envs)
+
+    @property
+    def names(self) -> list[str]:
+        """The macro-actions' names, in the order of the Manager's choices."""
+        return self.envs[0].names
 
     @property
     def obs_dim(self) -> int:
@@ -403,6 +431,118 @@ class MacroVectorEnv:
         """Close every environment."""
         for env in self.envs:
             env.close()
+
+
+class BatchedMacroVectorEnv:
+    """A Manager's ``N`` environments over one :class:`~hrlp.envs.batched.BatchedArmEnv`: the macro-action logic of
+    :func:`step_macros` (:func:`decide`, batched skill inference) with the physics of every world stepped in one call
+    per low-level step, the worlds whose macro-action has ended waiting (:meth:`BatchedArmEnv.advance`).
+
+    Args:
+        worlds: the ``N`` worlds of the low-level task; this object resets and steps them from now on.
+        layout: a :class:`MacroEnv` of the same task giving the macro-actions (skills, durations, parameter blocks,
+            hand-over, micro-action, gamma); its own environment is not stepped.
+
+    Its steps are :class:`MacroVectorEnv`'s over ``N`` MacroEnvs of the same task and seeds, to within the batched
+    physics' agreement with ArmEnv's (about 1e-7, :mod:`hrlp.envs.batched`); :meth:`get_state` has the same format.
+    """
+
+    def __init__(self, worlds: BatchedArmEnv, layout: MacroEnv) -> None:
+        if not isinstance(layout, MacroEnv):
+            raise ValueError(f"BatchedMacroVectorEnv: the layout must be a MacroEnv, got {type(layout).__name__}")
+        if type(worlds.task) is not type(layout.env.task):
+            raise ValueError(f"BatchedMacroVectorEnv: the worlds run {type(worlds.task).__name__}, the layout's "
+                             f"macro-actions {type(layout.env.task).__name__}")  # fmt: skip
+        self.worlds, self.layout, self.gamma = worlds, layout, layout.gamma
+        self._act_dim = 1 + int(layout.offsets[-1])
+        self._obs: np.ndarray | None = None
+
+    @property
+    def num_envs(self) -> int:
+        """N."""
+        return self.worlds.num_envs
+
+    @property
+    def names(self) -> list[str]:
+        """The macro-actions' names, in the order of the Manager's choices."""
+        return self.layout.names
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of one observation (the low-level task's)."""
+        return self.worlds.obs_dim
+
+    @property
+    def act_dim(self) -> int:
+        """``1 + S``: the choice, then every parameter block."""
+        return self._act_dim
+
+    @property
+    def resumable(self) -> bool:
+        """Always: every world's state is saved exactly."""
+        return True
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Reset every world (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
+        self._obs = self.worlds.reset(seed=seed)
+        return self._obs.copy()
+
+    def step(self, actions: np.ndarray) -> VectorStep:
+        """One decision in every world from flat hierarchical actions ``[N, 1 + S]`` (checked by :func:`decide`);
+        restarts the worlds whose episode ended."""
+        if self._obs is None:
+            raise RuntimeError("BatchedMacroVectorEnv: call reset() before step()")
+        n, worlds = self.num_envs, self.worlds
+        last: dict[str, np.ndarray] = {}
+        success = np.zeros(n, dtype=bool)
+        full, mask = np.zeros((n, N_JOINTS)), np.zeros(n, dtype=bool)
+        seconds = 0.0
+
+        def step(running: np.ndarray, torques: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            nonlocal seconds
+            full[:], mask[:] = 0.0, False
+            full[running], mask[running] = torques, True
+            out = worlds.advance(full, mask)
+            seconds += out.physics_seconds
+            for k, v in out.infos.items():
+                if k not in last:
+                    last[k] = np.zeros(n, dtype=bool) if v.dtype == bool else np.full(n, np.nan)
+                last[k][running] = v[running]
+            success[running] = out.success[running]
+            return out.next_obs[running], out.rewards[running], out.terminated[running], out.truncated[running]
+
+        _, res = decide(self.layout, self._obs, actions, step)
+        next_obs = res.obs
+        obs = next_obs.copy()
+        ended = np.flatnonzero(res.terminated | res.truncated)
+        if ended.size:
+            obs[ended] = worlds.reset_worlds(ended)
+        self._obs = obs
+        infos = {**last, "task_reward": res.task_reward, "choice": res.choice}
+        return VectorStep(obs=obs.copy(), next_obs=next_obs, rewards=res.rewards, discount=res.discount, tau=res.tau,
+                          terminated=res.terminated, truncated=res.truncated, success=success, infos=infos,
+                          physics_seconds=seconds)  # fmt: skip
+
+    def get_state(self) -> dict[str, Any]:
+        """:class:`MacroVectorEnv`'s format: ``{"envs": [{"env": world state, "obs": ...}], "obs": [N, obs_dim]}``."""
+        if self._obs is None:
+            raise RuntimeError("BatchedMacroVectorEnv: call reset() before get_state()")
+        worlds = self.worlds.get_state()["envs"]
+        return {"envs": [{"env": w, "obs": o} for w, o in zip(worlds, self._obs.tolist(), strict=True)],
+                "obs": self._obs.tolist()}  # fmt: skip
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`get_state` (or a :class:`MacroVectorEnv`'s of the same task)."""
+        if len(state["envs"]) != self.num_envs:
+            raise ValueError(f"BatchedMacroVectorEnv: the saved state has {len(state['envs'])} environments, this one "
+                             f"{self.num_envs}")  # fmt: skip
+        self.worlds.set_state({"envs": [s["env"] for s in state["envs"]]})
+        self._obs = np.asarray(state["obs"], dtype=np.float64).reshape(self.num_envs, self.obs_dim)
+
+    def close(self) -> None:
+        """Close the worlds and the layout's environment."""
+        self.worlds.close()
+        self.layout.close()
 
 
 @dataclass(frozen=True)
