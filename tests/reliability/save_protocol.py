@@ -4,7 +4,7 @@ protocol, then checked and resumed: the machinery of ``benchmarks/reliability.py
 
 The save protocol's steps are found, not listed: :func:`instrument` wraps the primitives :mod:`hrlp.checkpoint` calls
 (``tempfile.mkdtemp``, its synced writes and fsyncs, ``os.replace``, ``shutil.rmtree``) and the call of
-``save_checkpoint`` in :mod:`hrlp.train`, so every step announces itself just before it runs; the checkpoint code is
+``save_checkpoint`` in :mod:`hrlp.training.loop`, so every step announces itself just before it runs; the checkpoint code is
 unchanged. A training process started by :func:`run_child` (this file run as a script) kills itself before the chosen
 step of the chosen save; a write step has a second kill point, after half the bytes are on disk.
 """
@@ -51,7 +51,7 @@ def instrument(on_event: Any) -> Any:
     it runs (``save`` counts this process's saves from 1; ``proceed()`` runs the step). Returns a function that
     undoes it."""
     import hrlp.checkpoint as ck
-    import hrlp.train as tr
+    import hrlp.training.loop as tr  # where Trainer.save looks save_checkpoint up
 
     saved = (ck._write_synced, ck._fsync_directory, ck.os, ck.tempfile, ck.shutil, tr.save_checkpoint)
     real_save, real_write, real_fsync = tr.save_checkpoint, ck._write_synced, ck._fsync_directory

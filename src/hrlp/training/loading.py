@@ -1,0 +1,154 @@
+"""Loading runs: a run's checkpoint read and checked, its policy ready to act (:class:`TrainedPolicy`), and a
+skill's weights as a run's starting point (:func:`warm_start`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from hrlp.checkpoint import (
+    META_FILE,
+    CheckpointError,
+    load_checkpoint,
+    load_module,
+)
+from hrlp.config import TrainConfig
+from hrlp.envs.vector import VectorEnv
+from hrlp.policies.mlp import GaussianPolicy, Policy, policy_for_space
+from hrlp.policies.normalizer import RunningNormalizer
+from hrlp.rollout import (
+    action_decoder,
+    build_vector_env,
+)
+from hrlp.skills.macro_env import MacroEnv
+from hrlp.training.environments import (
+    TRAINING_ONLY_TASK_ARGS,
+    action_units,
+    batched_factory,
+    check_skill_hashes,
+    env_factory,
+)
+
+
+def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) -> None:
+    """Copy the skill ``cfg.init_from`` (its policy's weights and its observation statistics, thawed) into a fresh
+    flat run's ``policy`` and ``normalizer``. Raises ValueError naming the skill when it does not fit the run."""
+    from hrlp.skills.library import SkillLibrary, load_skill
+
+    assert cfg.init_from is not None
+    if cfg.macro is not None:
+        raise ValueError("init_from starts a flat run from a skill; a Manager cannot start from one")
+    where = Path(cfg.init_from)
+    skill = SkillLibrary(where.parent).load(where.name) if (where / "meta.json").is_file() else load_skill(cfg.init_from)
+    task = cfg.task.removeprefix("hrlp/").removesuffix("-v0")
+    if not isinstance(policy, GaussianPolicy) or skill.obs_dim != normalizer.mean.shape[0] or task != skill.task:
+        raise ValueError(f"init_from: skill {skill.name} ({skill.task}, {skill.obs_dim} observations) does not fit a "
+                         f"{task} run with {normalizer.mean.shape[0]} observations")  # fmt: skip
+    try:
+        policy.load_state_dict(skill.policy.state_dict())
+    except RuntimeError:
+        raise ValueError(f"init_from: skill {skill.name}'s network does not have hidden layers {cfg.hidden}") from None
+    normalizer.load_state_dict(skill.normalizer.state_dict())
+
+
+#: Keys of a training run's checkpoint meta that its readers need, with their JSON types. ``meta.json`` is not covered
+#: by the content hash (that is the weights' sha256; see :mod:`hrlp.checkpoint`), so they are checked on every read.
+RUN_META_KEYS: dict[str, type] = {"config": dict, "iteration": int, "env_steps": int, "normalizer": dict}
+
+
+def read_run_checkpoint(
+    directory: Path, more_keys: dict[str, type] | None = None
+) -> tuple[dict[str, torch.Tensor], dict[str, Any], TrainConfig]:
+    """``(tensors, meta, config)`` of a training run's checkpoint; a missing or mistyped key of :data:`RUN_META_KEYS`
+    (and ``more_keys``) or a malformed config raises :class:`~hrlp.checkpoint.CheckpointError` naming the file."""
+    tensors, meta = load_checkpoint(directory, required={**RUN_META_KEYS, **(more_keys or {})})
+    where = Path(directory) / META_FILE
+    try:
+        cfg = TrainConfig.from_json(meta["config"])
+    except KeyError as e:
+        raise CheckpointError(f"{where}: its 'config' has no {e}") from None
+    except (TypeError, ValueError, AttributeError) as e:
+        raise CheckpointError(f"{where}: its 'config' is malformed ({' '.join(str(e).split())})") from None
+    return tensors, meta, cfg
+
+
+def check_action_units(meta: dict[str, Any], units: str, where: Path) -> None:
+    """Raise :class:`CheckpointError` if a checkpoint's policy acts in other units than its environment now takes: a
+    parameterised-action run saved before parameters were normalised (no ``action_units``) acted in native units."""
+    saved = meta.get("action_units", "native")
+    if saved != units:
+        raise CheckpointError(f"{where}: its policy acts in {saved} units, and {meta['config']['task']}'s parameterised "
+                              f"actions are now taken in {units} ones (a run saved before hrlp took parameters in [-1, 1] "
+                              "acted in the environment's own units); train the run again")  # fmt: skip
+
+
+@dataclass
+class TrainedPolicy:
+    """A trained run's policy ready to act in its environment: frozen normaliser, actions decoded for the env."""
+
+    policy: Policy
+    normalizer: RunningNormalizer
+    config: TrainConfig
+    meta: dict[str, Any]
+    _decoder: tuple[gym.Space, Callable] | None = field(default=None, repr=False)
+
+    def make_env(self, **kwargs: Any) -> gym.Env:
+        """A fresh environment of the run (a :class:`MacroEnv` for a Manager); ``kwargs`` go to the task.
+
+        Training-only task arguments (:data:`TRAINING_ONLY_TASK_ARGS`, e.g. the angle curriculum) are dropped, so
+        a run is evaluated and shown on the task's full start distribution."""
+        cfg = self.config
+        task_kwargs = {k: v for k, v in cfg.task_kwargs.items() if k not in TRAINING_ONLY_TASK_ARGS}
+        return env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **{**task_kwargs, **kwargs})()
+
+    def vector_env(self, n: int, **kwargs: Any) -> VectorEnv:
+        """``n`` environments of the run as one :class:`~hrlp.envs.vector.VectorEnv`, stepped by the run's backend
+        (environment ``i`` as :meth:`make_env`'s); ``kwargs`` go to the task, as for :meth:`make_env`."""
+        cfg = self.config
+        task_kwargs = {k: v for k, v in cfg.task_kwargs.items() if k not in TRAINING_ONLY_TASK_ARGS}
+        factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **{**task_kwargs, **kwargs})
+        if cfg.backend == "batched":
+            factory = batched_factory(factory)
+        return build_vector_env([factory] * n, cfg.advantage.gamma)
+
+    def act_rows(self, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> np.ndarray:
+        """Flat action rows ``[N, act_dim]`` for raw observations ``[N, obs_dim]`` (what a VectorEnv steps)."""
+        return self.policy.act_numpy(self.normalizer(obs, update=False).astype(np.float32), generator, deterministic)
+
+    def act(self, env: gym.Env, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> Any:
+        """The action for one raw observation, in ``env``'s action space (clipped / a parameterised tuple)."""
+        a = self.policy.act_numpy(self.normalizer(obs, update=False)[None].astype(np.float32), generator, deterministic)
+        if self._decoder is None or self._decoder[0] is not env.action_space:  # built once per environment, not per step
+            self._decoder = (env.action_space, action_decoder(env.action_space))
+        return self._decoder[1](a)[0]
+
+
+def load_trained(run_dir: Path) -> TrainedPolicy:
+    """The policy of the run in ``run_dir`` (its ``checkpoint``), ready to act."""
+    policy, normalizer, meta = load_policy(Path(run_dir) / "checkpoint")
+    return TrainedPolicy(policy, normalizer, TrainConfig.from_json(meta["config"]), meta)  # checked by load_policy
+
+
+def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, Any]]:
+    """The trained policy (flat or Manager) and its frozen observation normaliser from a checkpoint directory."""
+    tensors, meta, cfg = read_run_checkpoint(directory)
+    env = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **cfg.task_kwargs)()
+    obs_dim = int(np.prod(env.observation_space.shape))
+    if isinstance(env, MacroEnv):
+        check_skill_hashes(meta.get("skills", {}), {s.name: s.content_hash for s in env.skills}, directory)
+    check_action_units(meta, action_units(env), directory)
+    policy = policy_for_space(obs_dim, env.action_space, cfg.hidden)
+    env.close()
+    load_module("policy", policy, tensors)
+    normalizer = RunningNormalizer.from_config(
+        meta["normalizer"], {k.removeprefix("normalizer."): v for k, v in tensors.items() if k.startswith("normalizer.")}
+    )
+    normalizer.freeze()
+    return policy, normalizer, meta
