@@ -7,7 +7,7 @@ so a run's numbers drift apart from the serial run's as training amplifies that 
 learning, over seeds. Printed: per-seed return and success, mean +- 95% CI (Student t over seeds) per backend, and
 Welch's t-test p-value of the returns.
 
-    python benchmarks/backend_returns.py [--task Reacher] [--steps 300000] [--seeds 3] [--episodes 50]
+    python benchmarks/backend_returns.py [--task Reacher] [--steps 300000] [--seeds 3] [--first-seed 0] [--episodes 50]
     python benchmarks/backend_returns.py --manager [--steps 200000]   # ReachAndGrip1, gripper + reacher, hand-over
 """
 
@@ -45,7 +45,8 @@ def main() -> None:
         "--batch-steps", type=int, default=None, help="decisions per iteration (default 25,000 flat, 2,000 Manager)"
     )
     ap.add_argument("--num-envs", type=int, default=64)
-    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--seeds", type=int, default=3, help="seeds per backend: first-seed .. first-seed + seeds - 1")
+    ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--episodes", type=int, default=50)
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -54,7 +55,7 @@ def main() -> None:
     batch = args.batch_steps or (2_000 if args.manager else 25_000)
     results: dict[str, list[tuple[float, float | None]]] = {"serial": [], "batched": []}
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             for backend in results:
                 cfg = TrainConfig(task=task, macro=macro, steps=args.steps, batch_steps=batch, num_envs=args.num_envs,
                                   seed=seed, backend=backend)  # fmt: skip
