@@ -23,6 +23,7 @@ from hrlp.training.environments import (
     batched_factory,
     check_skill_hashes,
     env_factory,
+    run_factory,
 )
 from hrlp.training.loading import (
     RUN_META_KEYS,
@@ -78,6 +79,7 @@ __all__ = [
     "progress_line",
     "read_run_checkpoint",
     "rejected_steps_message",
+    "run_factory",
     "train",
     "train_with_progress",
     "truncate_log",

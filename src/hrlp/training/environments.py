@@ -11,6 +11,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from hrlp.config import TrainConfig
 from hrlp.envs.batched import BatchedFactory, make_batched
 from hrlp.envs.registry import ArmEnvFactory
 from hrlp.envs.vector import VectorConstructor, VectorEnv
@@ -78,6 +79,14 @@ class _BatchedMacroFactory(_MacroFactory, VectorConstructor):
         if gamma != self.gamma:
             raise ValueError(f"the Manager's environments discount by {self.gamma}, not {gamma}")
         return BatchedMacroVectorEnv(make_batched(self.name, n, **self.kwargs), self())
+
+
+def run_factory(cfg: TrainConfig, task_kwargs: dict[str, Any] | None = None) -> Callable[[], gym.Env]:
+    """The constructor of one environment of ``cfg``'s run through its backend (:func:`batched_factory`'s for
+    ``backend`` batched, else :func:`env_factory`'s); ``task_kwargs`` replace the config's task arguments."""
+    kwargs = cfg.task_kwargs if task_kwargs is None else task_kwargs
+    factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **kwargs)
+    return batched_factory(factory) if cfg.backend == "batched" else factory
 
 
 def batched_factory(factory: Callable[[], gym.Env]) -> VectorConstructor:

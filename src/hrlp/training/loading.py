@@ -31,9 +31,9 @@ from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.environments import (
     TRAINING_ONLY_TASK_ARGS,
     action_units,
-    batched_factory,
     check_skill_hashes,
     env_factory,
+    run_factory,
 )
 
 
@@ -104,19 +104,19 @@ class TrainedPolicy:
 
         Training-only task arguments (:data:`TRAINING_ONLY_TASK_ARGS`, e.g. the angle curriculum) are dropped, so
         a run is evaluated and shown on the task's full start distribution."""
-        cfg = self.config
-        task_kwargs = {k: v for k, v in cfg.task_kwargs.items() if k not in TRAINING_ONLY_TASK_ARGS}
-        return env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **{**task_kwargs, **kwargs})()
+        return self._factory(kwargs)()
 
     def vector_env(self, n: int, **kwargs: Any) -> VectorEnv:
         """``n`` environments of the run as one :class:`~hrlp.envs.vector.VectorEnv`, stepped by the run's backend
         (environment ``i`` as :meth:`make_env`'s); ``kwargs`` go to the task, as for :meth:`make_env`."""
+        return build_vector_env([self._factory(kwargs)] * n, self.config.advantage.gamma)
+
+    def _factory(self, kwargs: dict[str, Any]) -> Callable[[], gym.Env]:
+        """The run's environment constructor (its backend's), without the training-only task arguments, with
+        ``kwargs`` over the run's task arguments."""
         cfg = self.config
         task_kwargs = {k: v for k, v in cfg.task_kwargs.items() if k not in TRAINING_ONLY_TASK_ARGS}
-        factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **{**task_kwargs, **kwargs})
-        if cfg.backend == "batched":
-            factory = batched_factory(factory)
-        return build_vector_env([factory] * n, cfg.advantage.gamma)
+        return run_factory(cfg, {**task_kwargs, **kwargs})
 
     def act_rows(self, obs: np.ndarray, generator: torch.Generator | None = None, deterministic: bool = True) -> np.ndarray:
         """Flat action rows ``[N, act_dim]`` for raw observations ``[N, obs_dim]`` (what a VectorEnv steps)."""

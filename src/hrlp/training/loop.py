@@ -41,7 +41,7 @@ from hrlp.rollout import (
     mean_or_nan,
 )
 from hrlp.skills.macro_env import MacroEnv
-from hrlp.training.environments import action_units, batched_factory, check_skill_hashes, env_factory
+from hrlp.training.environments import action_units, check_skill_hashes, run_factory
 from hrlp.training.loading import check_action_units, read_run_checkpoint, warm_start
 from hrlp.training.logs import RunLogger, progress_line, truncate_log, update_stat
 
@@ -57,9 +57,7 @@ class Trainer:
 
     def __init__(self, cfg: TrainConfig) -> None:
         self.cfg = cfg = cfg.resolved()
-        factory = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **cfg.task_kwargs)
-        if cfg.backend == "batched":  # every world of a process's share in one BatchedArmEnv (hrlp.rollout.build_vector_env)
-            factory = batched_factory(factory)
+        factory = run_factory(cfg)  # batched: every world of a process's share in one VectorEnv (build_vector_env)
         torch.manual_seed(cfg.seed)
         probe = factory()
         obs_dim = int(np.prod(probe.observation_space.shape))
