@@ -70,15 +70,18 @@ def graspable_bank(bank: Path, out: Path, max_hand_distance: float, max_capsule_
 
 
 def evaluate_gripper(
-    run: Path, bank: Path, episodes: int, label: str, graspable: Path | None = None
+    run: Path, bank: Path | None, episodes: int, label: str, graspable: Path | None = None
 ) -> dict[str, list[float]]:
-    """Greedy success of the Gripper run ``run`` from each of :data:`START_SETS` (and, given a ``graspable`` bank, from
-    its states as ``graspable_handover``): ``[mean, Wilson low, high]``."""
+    """Greedy success of the Gripper run ``run`` from each of :data:`START_SETS` (without a ``bank``, the two that need
+    none; given a ``graspable`` bank, also from its states as ``graspable_handover``): ``[mean, Wilson low, high]``."""
     results = {}
     sets = [*START_SETS, *([("graspable_handover", {"starts": str(graspable.resolve()), "starts_fraction": 1.0})]
                            if graspable is not None else [])]  # fmt: skip
+    if bank is None:
+        sets = [(where, kwargs) for where, kwargs in sets if where != "handover"]
     for where, kwargs in sets:
-        ev = evaluate_run(run, episodes=episodes, task_kwargs={"starts": str(bank.resolve()), **kwargs})
+        bank_kwargs = {} if bank is None else {"starts": str(bank.resolve())}
+        ev = evaluate_run(run, episodes=episodes, task_kwargs={**bank_kwargs, **kwargs})
         assert ev.success is not None
         results[where] = [ev.success.mean, ev.success.low, ev.success.high]
         print(f"{label}, from {where} starts: success {ev.success.mean:.2f} [{ev.success.low:.2f}, {ev.success.high:.2f}]",

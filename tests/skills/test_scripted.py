@@ -97,3 +97,67 @@ def test_imitation_writes_a_run_that_eval_reads_and_trpo_fine_tunes(tmp_path):
         imitate(dataclasses.replace(cfg, task="Reacher", task_kwargs={}), tmp_path / "other")
     with pytest.raises(ValueError, match="epochs"):
         ImitationConfig(epochs=0)
+
+
+def _gripper_env(steps: int = 15):
+    from hrlp.envs.registry import make
+    from hrlp.experiments.presets import GRIPPER_START
+
+    return make("Gripper", episode_steps=steps, **GRIPPER_START).unwrapped
+
+
+def test_collect_noise_moves_the_states_but_not_the_labels_and_is_reproducible():
+    from hrlp.skills.imitate import collect
+
+    env = _gripper_env()
+    expert = ScriptedGrasp(env.physics)
+    clean_obs, clean_act, _ = collect(env, expert, 1, seed=7)
+    noisy_obs, noisy_act, _ = collect(env, expert, 1, seed=7, noise=0.3)
+    again_obs, again_act, _ = collect(env, expert, 1, seed=7, noise=0.3)
+    np.testing.assert_array_equal(noisy_obs, again_obs)  # the noise comes from a generator seeded by the call
+    np.testing.assert_array_equal(noisy_act, again_act)
+    np.testing.assert_array_equal(clean_obs[0], noisy_obs[0])  # same start, same clean label there
+    np.testing.assert_array_equal(clean_act[0], noisy_act[0])
+    assert np.abs(clean_obs[-1] - noisy_obs[-1]).max() > 1e-3  # the executed actions were perturbed
+    # each label is the expert's noise-free action at the state it labels: relabelling a visited state agrees
+    env.reset(seed=7)
+    np.testing.assert_allclose(np.clip(expert.act(), -1, 1), noisy_act[0])
+
+
+def test_collect_with_the_expert_always_mixed_in_is_the_expert_rollout():
+    from hrlp.skills.imitate import collect
+
+    env = _gripper_env()
+    expert = ScriptedGrasp(env.physics)
+    obs, act, success = collect(env, expert, 2, seed=3)
+    mixed_obs, mixed_act, mixed_success = collect(env, expert, 2, seed=3, student=lambda o: np.zeros(9), expert_prob=1.0)
+    np.testing.assert_array_equal(obs, mixed_obs)
+    np.testing.assert_array_equal(act, mixed_act)
+    assert success == mixed_success
+    student_obs, _, _ = collect(env, expert, 2, seed=3, student=lambda o: np.zeros(9))  # the student alone: other states
+    assert np.abs(student_obs[-1] - obs[-1]).max() > 1e-3
+
+
+def test_imitation_keeps_the_best_evaluated_round(tmp_path):
+    from hrlp.config import TrainConfig
+    from hrlp.experiments.presets import GRIPPER_START
+    from hrlp.skills.imitate import ImitationConfig, greedy_success, imitate
+    from hrlp.train import load_trained
+
+    cfg = TrainConfig(task="Gripper", steps=200, batch_steps=100, num_envs=2, episode_steps=20, task_kwargs=GRIPPER_START)
+    icfg = ImitationConfig(expert_episodes=2, dagger_rounds=2, dagger_episodes=1, epochs=5, expert_noise=0.05, beta=0.5,
+                           eval_episodes=2)  # fmt: skip
+    summary = imitate(cfg, tmp_path / "run", icfg, log=lambda line: None)
+    scores = [r["student_success"] for r in summary["rounds"]]
+    assert len(scores) == 3 and all(s in (0.0, 0.5, 1.0) for s in scores)
+    assert summary["kept_round"] == max(range(3), key=lambda r: (scores[r], r))  # the best, the later on ties
+    assert summary["rounds"][1]["acting"] == "student, expert w.p. 0.5"
+    # the written student is the kept round's: alone on the same seeds it scores what that round scored
+    trained = load_trained(tmp_path / "run")
+    env = _gripper_env(20)
+    seed = 1_000_000 + 10_000 * cfg.seed - 10_000
+    assert greedy_success(env, lambda o: trained.act_rows(o[None])[0], 2, seed) == scores[summary["kept_round"]]
+    with pytest.raises(ValueError, match="beta"):
+        ImitationConfig(beta=1.5)
+    with pytest.raises(ValueError, match="expert_noise"):
+        ImitationConfig(expert_noise=-0.1)

@@ -3,7 +3,11 @@
 Round 0 rolls the expert (:class:`~hrlp.skills.scripted.ScriptedGrasp`) out from the task's starts and records every
 state's observation with the expert's action. Each DAgger round (Ross et al., 2011) then rolls the current student out
 and labels the states *it* visits with the expert's actions, so the student learns to recover from its own mistakes;
-the student is refitted on everything gathered so far. The student is the network a flat TRPO run trains
+the student is refitted on everything gathered so far. Two standard refinements are options: the expert's executed
+actions may carry Gaussian noise while its labels stay clean (DART, Laskey et al., 2017), so that round 0 already shows
+how the expert recovers from small errors; and in DAgger round ``r`` the expert may still act at each step with
+probability ``beta**r`` (Ross et al.'s mixture policy), so that the early students' states stay near the expert's. The
+student is the network a flat TRPO run trains
 (:func:`hrlp.policies.mlp.policy_for_space`, with the run's hidden layers and initial log std) behind the run's
 observation normaliser, fitted by mean squared error of its mean action on the expert's (clipped) torques.
 
@@ -30,7 +34,7 @@ from hrlp.envs.arm_env import ArmEnv
 from hrlp.envs.registry import make
 from hrlp.skills.scripted import ScriptedGrasp
 
-__all__ = ["ImitationConfig", "collect", "fit_mean", "imitate"]
+__all__ = ["ImitationConfig", "collect", "fit_mean", "greedy_success", "imitate"]
 
 
 @dataclass(frozen=True)
@@ -49,27 +53,51 @@ class ImitationConfig:
     """States per Adam step."""
     lr: float = 1e-3
     """Adam's learning rate."""
+    expert_noise: float = 0.0
+    """Std of Gaussian noise added to the expert's executed action in round 0 (its labels stay clean; DART). 0: none."""
+    beta: float = 0.0
+    """In DAgger round r (1, 2, ...) the expert acts at each step with probability beta**r, else the student (0: the
+    student alone, plain DAgger)."""
+    eval_episodes: int = 0
+    """If > 0, each round's student is evaluated greedily over this many episodes (seeds apart from the collected
+    ones) and the best round's student is the one written (ties: the later round); 0: the last round's, unevaluated."""
 
     def __post_init__(self) -> None:
         for name in ("expert_episodes", "epochs", "minibatch"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"imitation {name} must be a positive integer, got {v!r}")
-        for name in ("dagger_rounds", "dagger_episodes"):
+        for name in ("dagger_rounds", "dagger_episodes", "eval_episodes"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"imitation {name} must be an integer >= 0, got {v!r}")
         if not (math.isfinite(self.lr) and self.lr > 0):
             raise ValueError(f"imitation lr must be a positive number, got {self.lr!r}")
+        if not (math.isfinite(self.expert_noise) and self.expert_noise >= 0):
+            raise ValueError(f"imitation expert_noise must be a number >= 0, got {self.expert_noise!r}")
+        if not (math.isfinite(self.beta) and 0 <= self.beta <= 1):
+            raise ValueError(f"imitation beta must be in [0, 1], got {self.beta!r}")
 
 
 def collect(
-    env: ArmEnv, expert: ScriptedGrasp, episodes: int, seed: int, student: Callable[[np.ndarray], np.ndarray] | None = None
+    env: ArmEnv,
+    expert: ScriptedGrasp,
+    episodes: int,
+    seed: int,
+    student: Callable[[np.ndarray], np.ndarray] | None = None,
+    *,
+    expert_prob: float = 0.0,
+    noise: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Roll out ``episodes`` episodes (environment seeds ``seed + i``), acting with ``student`` (a function of the raw
-    observation) or, if None, with the expert; label every visited state with the expert's action.
+    observation) or, if None, with the expert; label every visited state with the expert's (noise-free) action.
+
+    With a student, the expert still acts at each step with probability ``expert_prob``. Where the expert acts, its
+    action gets Gaussian noise of std ``noise`` (clipped to the action box). The draws come from a generator seeded
+    with ``seed``, so a call is reproducible.
 
     Returns ``(obs [M, D], expert actions [M, 9], success rate of the acting policy)``."""
+    rng = np.random.default_rng(seed)
     obs_rows, act_rows, wins = [], [], 0
     for i in range(episodes):
         obs, _ = env.reset(seed=seed + i)
@@ -78,12 +106,31 @@ def collect(
             label = expert.act()
             obs_rows.append(obs.copy())
             act_rows.append(label)
-            action = label if student is None else student(obs)
+            if student is None or (expert_prob > 0 and rng.random() < expert_prob):
+                action = np.clip(label + noise * rng.standard_normal(label.shape), -1.0, 1.0) if noise else label
+            else:
+                action = student(obs)
             obs, _, terminated, truncated, info = env.step(action)
             success = success or bool(info["success"])
             done = terminated or truncated
         wins += success
     return np.asarray(obs_rows), np.clip(np.asarray(act_rows), -1.0, 1.0), wins / max(episodes, 1)
+
+
+def greedy_success(env: ArmEnv, student: Callable[[np.ndarray], np.ndarray], episodes: int, seed: int) -> float | None:
+    """Success rate of ``student`` acting alone over ``episodes`` episodes (environment seeds ``seed + i``); None for 0."""
+    if episodes == 0:
+        return None
+    wins = 0
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed + i)
+        done, success = False, False
+        while not done:
+            obs, _, terminated, truncated, info = env.step(student(obs))
+            success = success or bool(info["success"])
+            done = terminated or truncated
+        wins += success
+    return wins / episodes
 
 
 def fit_mean(policy: Any, obs: torch.Tensor, actions: torch.Tensor, cfg: ImitationConfig, generator: torch.Generator) -> float:
@@ -138,29 +185,40 @@ def _imitate(trainer: Any, train_config: TrainConfig, run_dir: Path, cfg: Imitat
 
     rounds: list[dict[str, Any]] = []
     seed = 1_000_000 + 10_000 * train_config.seed  # apart from evaluation's seeds (10,000 + episode)
-    obs, act, success = collect(env, expert, cfg.expert_episodes, seed)
+    obs, act, success = collect(env, expert, cfg.expert_episodes, seed, noise=cfg.expert_noise)
     normalizer.update(obs)
     all_obs, all_act = [obs], [act]
+    best: tuple[float, int, dict[str, torch.Tensor]] | None = None
     for r in range(cfg.dagger_rounds + 1):
         x = torch.as_tensor(normalizer.normalize(np.concatenate(all_obs)), dtype=torch.float32)
         y = torch.as_tensor(np.concatenate(all_act), dtype=torch.float32)
         mse = fit_mean(policy, x, y, cfg, generator)
-        rounds.append({"round": r, "acting": "expert" if r == 0 else "student", "acting_success": success,
-                       "states": int(x.shape[0]), "fit_mse": mse})  # fmt: skip
-        log(f"imitation round {r}: {'expert' if r == 0 else 'student'} acted, success {success:.2f}; "
-            f"{x.shape[0]:,} labelled states, fit MSE {mse:.4f}")  # fmt: skip
+        alone = greedy_success(env, student, cfg.eval_episodes, seed - 10_000)
+        acting = "expert" if r == 0 else ("student" if not cfg.beta else f"student, expert w.p. {cfg.beta**r:.3g}")
+        rounds.append({"round": r, "acting": acting, "acting_success": success, "states": int(x.shape[0]),
+                       "fit_mse": mse, "student_success": alone})  # fmt: skip
+        log(f"imitation round {r}: {acting} acted, success {success:.2f}; {x.shape[0]:,} labelled states, fit MSE "
+            f"{mse:.4f}" + ("" if alone is None else f"; the student alone succeeds {alone:.2f}"))  # fmt: skip
+        if alone is not None and (best is None or alone >= best[0]):
+            best = (alone, r, {k: v.clone() for k, v in policy.mean_net.state_dict().items()})
         if r == cfg.dagger_rounds:
             break
-        obs, act, success = collect(env, expert, cfg.dagger_episodes, seed + 100_000 * (r + 1), student)
+        obs, act, success = collect(env, expert, cfg.dagger_episodes, seed + 100_000 * (r + 1), student,
+                                    expert_prob=cfg.beta ** (r + 1), noise=cfg.expert_noise)  # fmt: skip
         all_obs.append(obs)
         all_act.append(act)
+    kept = cfg.dagger_rounds
+    if best is not None:
+        kept = best[1]
+        policy.mean_net.load_state_dict(best[2])
+        log(f"imitation keeps round {kept}'s student (alone {best[0]:.2f})")
     env.close()
     run_dir.mkdir(parents=True, exist_ok=True)
     trainer.save(run_dir / "checkpoint")
     config_path = run_dir / "config.json"
     with writing(config_path):
         config_path.write_text(json.dumps(train_config.to_json(), indent=2))
-    summary = {"imitation": asdict(cfg), "rounds": rounds}
+    summary = {"imitation": asdict(cfg), "rounds": rounds, "kept_round": kept}
     out = run_dir / "imitation.json"
     with writing(out):
         out.write_text(json.dumps(summary, indent=1))
