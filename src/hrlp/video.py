@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, SupportsFloat
 
+import gymnasium as gym
 import numpy as np
 from rich.console import Console
 
@@ -137,15 +138,34 @@ def write_video(path: Path, frames: Iterable[np.ndarray], fps: int) -> int:
     return n
 
 
+class _FrameRecorder(gym.Wrapper):
+    """Renders a frame after every step, kept in ``frames`` until taken: a flat environment's frames, drawn as the
+    step ends (before the vector environment resets an episode that ended), as a MacroEnv's ``on_substep`` does."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.frames: list[np.ndarray] = []
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        out = self.env.step(action)
+        self.frames.append(self.env.render())  # type: ignore[arg-type]
+        return out
+
+
 def rollout_frames(
     source: str | Path, steps: int = 0, seed: int = 0, console: Console | None = None, **render_kwargs: Any
 ) -> tuple[Iterator[np.ndarray], int, str]:
     """Frames of a rollout (a generator), the frame rate, and what is shown: ``source`` is a task (random actions)
-    or a run directory (its policy, deterministic). ``steps`` low-level steps, 0 for one episode."""
+    or a run directory (its policy, deterministic). ``steps`` low-level steps, 0 for one episode.
+
+    The rollout goes through the same :class:`~hrlp.envs.vector.VectorEnv` protocol as training and evaluation (one
+    environment: :func:`hrlp.rollout.vector_env`), with the policy's flat action rows; the frames are drawn after
+    every low-level step (a Manager's labelled with the macro-action running)."""
     import torch
     from rich.progress import Progress
 
     from hrlp.envs import TASKS, ArmEnv, make
+    from hrlp.rollout import vector_env
     from hrlp.skills.macro_env import MacroEnv
 
     if Path(source).is_dir():
@@ -157,7 +177,7 @@ def rollout_frames(
         env = trained.make_env(render_mode="rgb_array") if gym_run else trained.make_env(render_mode="rgb_array",
                                                                                           **render_kwargs)  # fmt: skip
         gen = torch.Generator().manual_seed(seed)
-        act = lambda obs: trained.act(env, obs, gen, True)  # noqa: E731
+        act = lambda obs: trained.act_rows(obs, gen, True)  # noqa: E731
         name = f"{trained.config.task} ({'Manager' if isinstance(env, MacroEnv) else 'flat policy'} of {source})"
     else:
         task = str(source).removeprefix("hrlp/").removesuffix("-v0")
@@ -165,7 +185,7 @@ def rollout_frames(
             raise ValueError(f"unknown task {source!r}; run 'hrlp tasks' to list them (only hrlp tasks render)")
         env = make(task, render_mode="rgb_array", **render_kwargs)
         rng = np.random.default_rng(seed)
-        act = lambda obs: rng.uniform(-1.0, 1.0, size=9)  # noqa: E731
+        act = lambda obs: rng.uniform(-1.0, 1.0, size=(1, 9))  # noqa: E731
         name = f"{task} (random actions)"
     low = env.env if isinstance(env, MacroEnv) else env.unwrapped
     if isinstance(low, ArmEnv):
@@ -180,23 +200,26 @@ def rollout_frames(
         fps = int(env.metadata.get("render_fps") or 30)
 
     def frames() -> Iterator[np.ndarray]:
-        obs, _ = env.reset(seed=seed)
-        pending: list = []
         if isinstance(env, MacroEnv):
+            pending: list[np.ndarray] = []
             env.on_substep = lambda macro: pending.append(label_frame(env.render(), macro))
+            vec = vector_env([env])
+        else:
+            recorder = _FrameRecorder(env)
+            pending = recorder.frames
+            vec = vector_env([recorder])
+        obs = vec.reset(seed=seed)
         yield env.render()
         done = 0
         with Progress(console=console, transient=True, disable=console is None) as progress:
             bar = progress.add_task(f"rendering {name}", total=n)
             while done < n:
-                obs, _, terminated, truncated, _ = env.step(act(obs))
-                frames_now = pending[:] if pending else [env.render()]
+                obs = vec.step(act(obs)).obs  # the next episode's first observation where one ended
+                frames_now = pending[:]
                 pending.clear()
                 yield from frames_now[: n - done]
                 done += len(frames_now)
                 progress.update(bar, completed=min(done, n))
-                if terminated or truncated:
-                    obs, _ = env.reset()
-        env.close()
+        vec.close()
 
     return frames(), fps, name

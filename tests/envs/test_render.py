@@ -38,3 +38,24 @@ def test_render_command_rejects_bad_input_before_rendering(tmp_path):
     r = runner.invoke(app, ["render", "Gripper", "--out", str(tmp_path / "a.avi")])
     assert r.exit_code == 2 and ".mp4 or .gif" in r.output
     assert not any(tmp_path.iterdir())
+
+
+def test_rollout_frames_are_an_ordinary_rollouts_frames_across_an_episode_end():
+    from hrlp.video import rollout_frames
+
+    frames, fps, name = rollout_frames("Gripper", steps=14, seed=3, width=48, height=32, episode_steps=6)
+    frames = list(frames)
+    assert len(frames) == 15 and "random actions" in name and fps > 0
+    # the same rollout by hand: seed 3, the same random torques, a frame after every step, a reset after 6 steps
+    env = make("Gripper", render_mode="rgb_array", width=48, height=32, episode_steps=6)
+    rng = np.random.default_rng(3)
+    env.reset(seed=3)
+    expected = [env.render()]
+    for _ in range(14):
+        _, _, terminated, truncated, _ = env.step(rng.uniform(-1.0, 1.0, size=(1, 9))[0])
+        expected.append(env.render())
+        if terminated or truncated:
+            env.reset()
+    env.close()
+    assert all(np.array_equal(a, b) for a, b in zip(frames, expected, strict=True))
+    assert not np.array_equal(frames[6], frames[7])  # the episode ended at step 6: frame 7 is a new episode's
