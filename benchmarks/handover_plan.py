@@ -6,6 +6,7 @@ than 1 cm. Rows: the paper's interface (absolute goals, the skill as trained) an
 with each of its parts alone and all together.
 
     python benchmarks/handover_plan.py --episodes 48 --reacher reacher
+    python benchmarks/handover_plan.py --reacher reacher-handover --library runs/lib   # a skill of your library
 """
 
 from __future__ import annotations
@@ -21,9 +22,10 @@ from hrlp.skills.macro_env import Handover, MacroEnv, step_macros
 C = slice(21, 24)
 
 
-def scripted(reacher: str, handover: Handover | None, episodes: int, k: int, reach_calls: int) -> tuple[float, float]:
+def scripted(reacher: str, handover: Handover | None, episodes: int, k: int, reach_calls: int,
+             library: str | None = None) -> tuple[float, float]:  # fmt: skip
     """(success rate, share of episodes whose capsule moved > 1 cm while reaching)."""
-    skills = [load_skill("gripper"), load_skill(reacher)]
+    skills = [load_skill("gripper", library), load_skill(reacher, library)]
     envs = [MacroEnv(make("ReachAndGrip1"), skills, k=k, handover=handover) for _ in range(episodes)]
     for i, e in enumerate(envs):
         e.reset(seed=i)
@@ -47,6 +49,7 @@ def main() -> None:
     ap.add_argument("--reacher", default="reacher")
     ap.add_argument("--k", type=int, default=10)
     ap.add_argument("--reach-calls", type=int, default=8)
+    ap.add_argument("--library", help="a skill library to look in first (default: yours, then the shipped skills)")
     a = ap.parse_args()
     rows = [
         ("the paper's (absolute goals, as trained)", None),
@@ -57,7 +60,7 @@ def main() -> None:
     ]
     print(f"| interface ({a.reacher}) | success | capsule pushed > 1 cm while reaching |\n|---|---:|---:|")
     for name, h in rows:
-        s, m = scripted(a.reacher, h, a.episodes, a.k, a.reach_calls)
+        s, m = scripted(a.reacher, h, a.episodes, a.k, a.reach_calls, a.library)
         print(f"| {name} | {s:.2f} | {m:.2f} |", flush=True)
 
 
