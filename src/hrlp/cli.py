@@ -394,7 +394,7 @@ _LEFT_OUT: dict[type, dict[str, str]] = {
         "trpo": "nested: each TRPOConfig field is an option of its own",
         "ppo": "nested: each PPOConfig field is an option of its own (--ppo-...)",
         "value": "nested: each ValueFitConfig field is an option of its own (--value-...)",
-        "macro": "a MacroSpec that train-manager's own options build (--skills, --k, --library, --micro..., --handover); "
+        "macro": "a MacroSpec that train-manager's own options build (--skills, --k, --library, --micro..., --handover...); "
         "a flat run has none",
         "task_kwargs": "given as --task-arg NAME=VALUE, repeatable (a dict has no one-token form), below",
         "init_from": "set by 'hrlp dagger', which warm-starts a skill's retraining; a fresh run starts from a fresh "
@@ -636,6 +636,22 @@ def train_manager(
             "open (docs/skills.md); --no-handover: the paper's absolute goals, skills run as trained."
         ),
     ] = True,
+    handover_approach_height: Annotated[
+        float,
+        typer.Option(
+            help="Metres a Reacher's goal is raised until the hand is above it, in [0, 1] (0: straight to the goal; "
+            "needs --handover).",
+            callback=check.real(0.0, 1.0),
+        ),
+    ] = 0.11,
+    handover_open_torque: Annotated[
+        float,
+        typer.Option(
+            help="Torque holding the claw open while a Reacher runs, in place of its own finger torques, in [0, 1] "
+            "(0: the skill's own, for a Reacher trained to keep the claw open; needs --handover).",
+            callback=check.real(0.0, 1.0),
+        ),
+    ] = 0.2,
     run_dir: _RUN_DIR = None,
     task_arg: _TASK_ARG = None,
     resume: _RESUME = False,
@@ -654,6 +670,12 @@ def train_manager(
             one = len(ignored) == 1
             raise ValueError(f"{', '.join(ignored)} set{'s' if one else ''} the micro-action, which this Manager does not "
                              f"have: add --micro, or leave {'it' if one else 'them'} out")  # fmt: skip
+        if ignored := [f"--{n.replace('_', '-')}" for n in ("handover_approach_height", "handover_open_torque")
+                       if not handover and _given(ctx, n)]:  # fmt: skip
+            one = len(ignored) == 1
+            them = "it" if one else "them"
+            raise ValueError(f"{', '.join(ignored)} set{'s' if one else ''} how Reachers are driven for hand-over, "
+                             f"which --no-handover turns off: drop --no-handover, or leave {them} out")  # fmt: skip
         if k is not None and not skills.strip():
             raise ValueError("--k sets how long each skill runs, and this Manager has no skills (--skills)")
         note = _small_batch_defaults(ctx)
@@ -666,7 +688,8 @@ def train_manager(
     try:
         names = tuple(s.strip() for s in skills.split(",") if s.strip())
         m = MicroAction(micro_duration, micro_penalty, micro_max_torque) if micro else None
-        spec = MacroSpec(names, k, m, None if library is None else str(library), Handover() if handover else None)
+        drive = Handover(approach_height=handover_approach_height, open_torque=handover_open_torque) if handover else None
+        spec = MacroSpec(names, k, m, None if library is None else str(library), drive)
     except ValueError:
         if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
             raise
@@ -939,10 +962,23 @@ def _handover_flag() -> tuple[Any, Any]:
     def put(c: Any, v: bool, p: dict[str, Any]) -> Any:
         from hrlp.skills.macro_env import Handover
 
-        handover = (c.macro.handover or Handover()) if v else None
+        fresh = Handover(approach_height=p["handover_approach_height"], open_torque=p["handover_open_torque"])
+        handover = (c.macro.handover or fresh) if v else None
         return dataclasses.replace(c, macro=dataclasses.replace(c.macro, handover=handover))
 
     return (lambda c: "on" if c.macro.handover is not None else "off"), put
+
+
+def _handover_field(field: str) -> tuple[Any, Any]:
+    import dataclasses
+
+    def put(c: Any, v: Any, p: dict[str, Any]) -> Any:
+        if c.macro.handover is None:  # the run drives no Reacher for hand-over: as with --no-handover, the option is unused
+            return c
+        handover = dataclasses.replace(c.macro.handover, **{field: v})
+        return dataclasses.replace(c, macro=dataclasses.replace(c.macro, handover=handover))
+
+    return (lambda c: "off" if c.macro.handover is None else getattr(c.macro.handover, field)), put
 
 
 def _micro_field(field: str) -> tuple[Any, Any]:
@@ -998,6 +1034,8 @@ _RESUME_ACCESSORS: dict[str, tuple[Any, Any]] = {
     "library": _replace_macro("library", lambda v: None if v is None else str(v)),
     "micro": _micro_flag(),
     "handover": _handover_flag(),
+    "handover_approach_height": _handover_field("approach_height"),
+    "handover_open_torque": _handover_field("open_torque"),
     "micro_duration": _micro_field("duration"),
     "micro_penalty": _micro_field("penalty"),
     "micro_max_torque": _micro_field("max_torque"),

@@ -30,7 +30,18 @@ LEFT_OUT = {(TrainConfig, name) for name in ("task", "advantage", "trpo", "ppo",
 VALUE_FLAGS = {"max_iter": "--value-iters", "fraction": "--value-fraction", "l2_coef": "--value-l2-coef",
                "history_size": "--value-history-size"}  # fmt: skip
 _SHARED_OWN = {"task", "run_dir", "task_arg", "resume", "paper_settings", "help"}
-_MANAGER_OWN = {"skills", "micro", "micro_duration", "micro_penalty", "micro_max_torque", "k", "library", "handover"}
+_MANAGER_OWN = {
+    "skills",
+    "micro",
+    "micro_duration",
+    "micro_penalty",
+    "micro_max_torque",
+    "k",
+    "library",
+    "handover",
+    "handover_approach_height",
+    "handover_open_torque",
+}
 OWN = {"train": _SHARED_OWN, "train-manager": _SHARED_OWN | _MANAGER_OWN}
 """Each command's own parameters, beside the generated ones."""
 

@@ -149,3 +149,28 @@ def test_train_manager_handover_flag_is_recorded_and_resume_keeps_it(tmp_path):
     r = CliRunner().invoke(app, ["train-manager", "ReachAndGrip1", "--no-handover", "--steps", "120", "--run-dir", str(run),
                                  "--resume"])  # fmt: skip
     assert r.exit_code == 2 and "--handover False (the run: on)" in r.output, r.output
+
+
+def test_train_manager_sets_the_handover_drive_and_resume_compares_it(tmp_path):
+    from typer.testing import CliRunner
+
+    from hrlp.cli import app
+
+    run = tmp_path / "m"
+    args = ["train-manager", "ReachAndGrip1", "--skills", "gripper,reacher", "--k", "3", "--handover-approach-height", "0",
+            "--handover-open-torque", "0", "--steps", "24", "--batch-steps", "12", "--num-envs", "2", "--episode-steps",
+            "12", "--run-dir", str(run)]  # fmt: skip
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    saved = MacroSpec.from_json(json.loads((run / "config.json").read_text())["macro"])
+    assert saved.handover == Handover(approach_height=0.0, open_torque=0.0)  # relative goals only: the skill as trained
+    r = CliRunner().invoke(app, ["train-manager", "ReachAndGrip1", "--handover-open-torque", "0.3", "--steps", "48",
+                                 "--run-dir", str(run), "--resume"])  # fmt: skip
+    assert r.exit_code == 2 and "--handover-open-torque 0.3 (the run: 0.0)" in r.output, r.output
+    r = CliRunner().invoke(app, ["train-manager", "ReachAndGrip1", "--skills", "gripper,reacher", "--no-handover",
+                                 "--handover-open-torque", "0", "--run-dir", str(tmp_path / "x")])  # fmt: skip
+    assert r.exit_code == 2 and "--handover-open-torque sets how Reachers are driven" in r.output, r.output
+    r = CliRunner().invoke(app, ["train-manager", "ReachAndGrip1", "--skills", "gripper,reacher", "--handover-open-torque",
+                                 "1.5", "--run-dir", str(tmp_path / "y")])  # fmt: skip
+    assert r.exit_code == 2 and "--handover-open-torque" in r.output, r.output
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
