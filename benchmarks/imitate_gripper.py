@@ -9,8 +9,8 @@ environment steps and evaluates it again. ``--hidden``, ``--init-log-std``, ``--
 
     python benchmarks/imitate_gripper.py --bank runs/dagger/round1/starts.npz --out runs/gripper-imitated
     python benchmarks/imitate_gripper.py --bank runs/dagger/round1/starts.npz --out runs/gripper-imitated2 \
-        --task-arg observe_capsule=true --hidden 256,256 --expert-episodes 400 --expert-noise 0.05 --beta 0.5 \
-        --dagger-rounds 5 --dagger-episodes 200 --epochs 30 --minibatch 512 --eval-episodes 100 \
+        --task-arg observe_capsule=true --hidden 256,256 --expert-episodes 150 --noisy-expert-episodes 250 \
+        --expert-noise 0.3 --beta 0.5 --dagger-rounds 2 --dagger-episodes 200 --epochs 30 --minibatch 512 --eval-episodes 100 \
         --init-log-std -2 --backend batched --fine-tune-steps 8000000
 """
 
@@ -41,6 +41,7 @@ def main() -> None:
     ap.add_argument("--dagger-episodes", type=int, default=ImitationConfig.dagger_episodes)
     ap.add_argument("--epochs", type=int, default=ImitationConfig.epochs)
     ap.add_argument("--minibatch", type=int, default=ImitationConfig.minibatch)
+    ap.add_argument("--noisy-expert-episodes", type=int, default=0, help="round-0 episodes with DART noise")
     ap.add_argument("--expert-noise", type=float, default=ImitationConfig.expert_noise, help="DART noise std")
     ap.add_argument("--beta", type=float, default=ImitationConfig.beta, help="expert's share in DAgger round r: beta**r")
     ap.add_argument("--eval-episodes", type=int, default=ImitationConfig.eval_episodes, help="keep the best round")
@@ -62,7 +63,8 @@ def main() -> None:
         task_kwargs[key] = json.loads(value)
     recipe = dataclasses.replace(recipe, task_kwargs=task_kwargs, **changes)
     cfg = ImitationConfig(a.expert_episodes, a.dagger_rounds, a.dagger_episodes, a.epochs, a.minibatch,
-                          expert_noise=a.expert_noise, beta=a.beta, eval_episodes=a.eval_episodes)  # fmt: skip
+                          noisy_expert_episodes=a.noisy_expert_episodes, expert_noise=a.expert_noise, beta=a.beta,
+                          eval_episodes=a.eval_episodes)  # fmt: skip
     summary = imitate(recipe, a.out, cfg, log=lambda line: print(line, flush=True))
     summary["evaluation"] = {"imitated": evaluate_gripper(a.out, a.bank, a.episodes, "imitated")}
     if a.fine_tune_steps:

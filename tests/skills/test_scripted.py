@@ -145,11 +145,12 @@ def test_imitation_keeps_the_best_evaluated_round(tmp_path):
     from hrlp.train import load_trained
 
     cfg = TrainConfig(task="Gripper", steps=200, batch_steps=100, num_envs=2, episode_steps=20, task_kwargs=GRIPPER_START)
-    icfg = ImitationConfig(expert_episodes=2, dagger_rounds=2, dagger_episodes=1, epochs=5, expert_noise=0.05, beta=0.5,
-                           eval_episodes=2)  # fmt: skip
+    icfg = ImitationConfig(expert_episodes=1, noisy_expert_episodes=1, expert_noise=0.3, dagger_rounds=2, dagger_episodes=1,
+                           epochs=5, beta=0.5, eval_episodes=2)  # fmt: skip
     summary = imitate(cfg, tmp_path / "run", icfg, log=lambda line: None)
     scores = [r["student_success"] for r in summary["rounds"]]
     assert len(scores) == 3 and all(s in (0.0, 0.5, 1.0) for s in scores)
+    assert summary["rounds"][0]["states"] == 40  # the clean and the noisy expert episode, 20 steps each
     assert summary["kept_round"] == max(range(3), key=lambda r: (scores[r], r))  # the best, the later on ties
     assert summary["rounds"][1]["acting"] == "student, expert w.p. 0.5"
     # the written student is the kept round's: alone on the same seeds it scores what that round scored
@@ -161,3 +162,5 @@ def test_imitation_keeps_the_best_evaluated_round(tmp_path):
         ImitationConfig(beta=1.5)
     with pytest.raises(ValueError, match="expert_noise"):
         ImitationConfig(expert_noise=-0.1)
+    with pytest.raises(ValueError, match="needs expert_noise"):
+        ImitationConfig(noisy_expert_episodes=5)

@@ -3,11 +3,11 @@
 Round 0 rolls the expert (:class:`~hrlp.skills.scripted.ScriptedGrasp`) out from the task's starts and records every
 state's observation with the expert's action. Each DAgger round (Ross et al., 2011) then rolls the current student out
 and labels the states *it* visits with the expert's actions, so the student learns to recover from its own mistakes;
-the student is refitted on everything gathered so far. Two standard refinements are options: the expert's executed
-actions may carry Gaussian noise while its labels stay clean (DART, Laskey et al., 2017), so that round 0 already shows
-how the expert recovers from small errors; and in DAgger round ``r`` the expert may still act at each step with
-probability ``beta**r`` (Ross et al.'s mixture policy), so that the early students' states stay near the expert's. The
-student is the network a flat TRPO run trains
+the student is refitted on everything gathered so far. Two standard refinements are options:
+round 0 may add episodes in which the expert's executed actions carry Gaussian noise while its labels stay clean
+(DART, Laskey et al., 2017), so that it already shows how the expert recovers from states off its own path; and in
+DAgger round ``r`` the expert may still act at each step with probability ``beta**r`` (Ross et al.'s mixture policy),
+so that the early students' states stay near the expert's. The student is the network a flat TRPO run trains
 (:func:`hrlp.policies.mlp.policy_for_space`, with the run's hidden layers and initial log std) behind the run's
 observation normaliser, fitted by mean squared error of its mean action on the expert's (clipped) torques.
 
@@ -53,8 +53,11 @@ class ImitationConfig:
     """States per Adam step."""
     lr: float = 1e-3
     """Adam's learning rate."""
+    noisy_expert_episodes: int = 0
+    """More round-0 episodes, in which the expert's executed actions carry Gaussian noise of std ``expert_noise`` (its
+    labels stay clean; DART): they show how the expert recovers from states off its own path."""
     expert_noise: float = 0.0
-    """Std of Gaussian noise added to the expert's executed action in round 0 (its labels stay clean; DART). 0: none."""
+    """Std of that noise, in action units (the action box is [-1, 1])."""
     beta: float = 0.0
     """In DAgger round r (1, 2, ...) the expert acts at each step with probability beta**r, else the student (0: the
     student alone, plain DAgger)."""
@@ -67,7 +70,7 @@ class ImitationConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"imitation {name} must be a positive integer, got {v!r}")
-        for name in ("dagger_rounds", "dagger_episodes", "eval_episodes"):
+        for name in ("dagger_rounds", "dagger_episodes", "eval_episodes", "noisy_expert_episodes"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"imitation {name} must be an integer >= 0, got {v!r}")
@@ -75,6 +78,8 @@ class ImitationConfig:
             raise ValueError(f"imitation lr must be a positive number, got {self.lr!r}")
         if not (math.isfinite(self.expert_noise) and self.expert_noise >= 0):
             raise ValueError(f"imitation expert_noise must be a number >= 0, got {self.expert_noise!r}")
+        if self.noisy_expert_episodes and not self.expert_noise:
+            raise ValueError("imitation noisy_expert_episodes needs expert_noise > 0 (the noise's std)")
         if not (math.isfinite(self.beta) and 0 <= self.beta <= 1):
             raise ValueError(f"imitation beta must be in [0, 1], got {self.beta!r}")
 
@@ -185,9 +190,13 @@ def _imitate(trainer: Any, train_config: TrainConfig, run_dir: Path, cfg: Imitat
 
     rounds: list[dict[str, Any]] = []
     seed = 1_000_000 + 10_000 * train_config.seed  # apart from evaluation's seeds (10,000 + episode)
-    obs, act, success = collect(env, expert, cfg.expert_episodes, seed, noise=cfg.expert_noise)
-    normalizer.update(obs)
+    obs, act, success = collect(env, expert, cfg.expert_episodes, seed)
     all_obs, all_act = [obs], [act]
+    if cfg.noisy_expert_episodes:
+        obs, act, _ = collect(env, expert, cfg.noisy_expert_episodes, seed + 50_000, noise=cfg.expert_noise)
+        all_obs.append(obs)
+        all_act.append(act)
+    normalizer.update(np.concatenate(all_obs))
     best: tuple[float, int, dict[str, torch.Tensor]] | None = None
     for r in range(cfg.dagger_rounds + 1):
         x = torch.as_tensor(normalizer.normalize(np.concatenate(all_obs)), dtype=torch.float32)
@@ -204,7 +213,7 @@ def _imitate(trainer: Any, train_config: TrainConfig, run_dir: Path, cfg: Imitat
         if r == cfg.dagger_rounds:
             break
         obs, act, success = collect(env, expert, cfg.dagger_episodes, seed + 100_000 * (r + 1), student,
-                                    expert_prob=cfg.beta ** (r + 1), noise=cfg.expert_noise)  # fmt: skip
+                                    expert_prob=cfg.beta ** (r + 1))  # fmt: skip
         all_obs.append(obs)
         all_act.append(act)
     kept = cfg.dagger_rounds
