@@ -25,7 +25,7 @@ from hrlp.train import TrainConfig, load_policy, train
 LOAD_KINDS = ("weights-fifo", "meta-fifo", "weights-dev-zero", "meta-huge", "meta-deep", "obs-dim-huge", "hidden-huge",
               "block-misfit", "weights-nan", "weights-int", "k-fraction", "entry-linked-outside", "name-parent",
               "name-absolute", "weights-pickle")  # fmt: skip
-SHIPPED = ("gripper", "mover-noised", "mover-plain", "reacher", "reacher3d", "s-reacher")
+SHIPPED = ("gripper", "mover-noised", "mover-plain", "reacher", "reacher-handover", "reacher3d", "s-reacher")
 
 
 @pytest.fixture(scope="module")

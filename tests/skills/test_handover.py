@@ -97,6 +97,12 @@ def test_the_shipped_reacher_hands_over_to_the_gripper_only_through_the_handover
     assert paper < 0.25 and handover > 0.6, (paper, handover)
 
 
+def test_the_shipped_handover_reacher_hands_over_through_the_papers_interface():
+    # Trained for hand-over (ReacherHandover), it needs none of the drives: absolute goals, its own finger torques.
+    skills = [load_skill("gripper"), load_skill("reacher-handover")]
+    assert _scripted_success(skills, None, episodes=24) >= 0.9
+
+
 def test_parameters_are_declared_in_code_and_manifests_cannot_redefine_them(tmp_path):
     lib = SkillLibrary(tmp_path)
     import shutil
