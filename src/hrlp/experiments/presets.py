@@ -106,6 +106,15 @@ def _handover(config: TrainConfig) -> TrainConfig:
     return replace(config, macro=replace(config.macro, handover=Handover()), init_log_std=-1.0)
 
 
+def _relative_only(config: TrainConfig, reacher: str) -> TrainConfig:
+    """:func:`_handover`'s config with ``reacher`` in place of ``reacher`` and only the goals made capsule-relative: a
+    Reacher trained to hand over needs neither the approach drive nor the claw held open."""
+    assert config.macro is not None
+    config = _handover(config)
+    skills = tuple(reacher if s == "reacher" else s for s in config.macro.skills)
+    return replace(config, macro=replace(config.macro, skills=skills, handover=Handover(approach_height=0.0, open_torque=0.0)))
+
+
 def _kl(config: TrainConfig, max_kl: float) -> TrainConfig:
     """``config`` with the trust region's radius ``max_kl`` (its other TRPO settings kept)."""
     return replace(config, trpo=replace(config.trpo, max_kl=max_kl))
@@ -333,6 +342,26 @@ PRESETS: dict[str, Preset] = {
                 for (c2, tr), paper in cells.items()
             ),
             budget=2_000_000,
+        ),
+        Preset(
+            "reach-and-grip-2-reacher-handover",
+            "Figure 7's grid (Experiment 2, k = 15) with the Reacher trained for hand-over (reacher-handover) in place of "
+            "the paper's: capsule-relative goals only, the skill run as trained (no approach drive, its own finger "
+            "torques); the headline's Manager settings; paper: its figure for the same set with its own Reacher",
+            "Section 4.3.1, Figure 7",
+            tuple(
+                Run(
+                    f"{label.replace('reacher', 'reacher-handover')},c2={c2},tr={tr}",
+                    _relative_only(
+                        replace(_tuned_manager(*_FIG7_SKILLS[label]), task_kwargs={"c2": c2, "tr": tr}), "reacher-handover"
+                    ),
+                    paper,
+                )
+                for label, cells in _FIG7.items()
+                if label in ("gripper+reacher", "gripper+reacher+micro")
+                for (c2, tr), paper in cells.items()
+            ),
+            budget=3_000_000,
         ),
         Preset(
             "reach-and-grip-2",
