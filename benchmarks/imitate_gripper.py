@@ -22,6 +22,7 @@ import json
 from pathlib import Path
 
 from gripper_variants import evaluate_gripper
+from hrlp.cli import parse_task_args
 from hrlp.experiments.presets import PRESETS
 from hrlp.skills.imitate import ImitationConfig, imitate
 from hrlp.train import train
@@ -41,27 +42,26 @@ def main() -> None:
     ap.add_argument("--dagger-episodes", type=int, default=ImitationConfig.dagger_episodes)
     ap.add_argument("--epochs", type=int, default=ImitationConfig.epochs)
     ap.add_argument("--minibatch", type=int, default=ImitationConfig.minibatch)
-    ap.add_argument("--noisy-expert-episodes", type=int, default=0, help="round-0 episodes with DART noise")
+    ap.add_argument("--noisy-expert-episodes", type=int, default=ImitationConfig.noisy_expert_episodes,
+                    help="round-0 episodes with DART noise")  # fmt: skip
     ap.add_argument("--expert-noise", type=float, default=ImitationConfig.expert_noise, help="DART noise std")
     ap.add_argument("--beta", type=float, default=ImitationConfig.beta, help="expert's share in DAgger round r: beta**r")
     ap.add_argument("--eval-episodes", type=int, default=ImitationConfig.eval_episodes, help="keep the best round")
     ap.add_argument("--hidden", type=lambda s: tuple(int(w) for w in s.split(",")), default=None, help="e.g. 256,256")
     ap.add_argument("--init-log-std", type=float, default=None)
     ap.add_argument("--backend", choices=("auto", "batched", "serial"), default=None)
-    ap.add_argument("--task-arg", action="append", default=[], metavar="KEY=VALUE", help="a task argument (JSON value)")
+    ap.add_argument("--task-arg", action="append", default=[], metavar="KEY=VALUE", help="as hrlp train reads it")
     ap.add_argument("--episodes", type=int, default=200, help="greedy evaluation episodes per start set")
     ap.add_argument("--fine-tune-steps", type=int, default=0, help="TRPO environment steps after imitation (0: none)")
     a = ap.parse_args()
     recipe = next(r.config for r in PRESETS["shipped-skills"].runs if r.name == "gripper")
     options = (("hidden", a.hidden), ("init_log_std", a.init_log_std), ("backend", a.backend))
     changes = {k: v for k, v in options if v is not None}
-    task_kwargs = dict(recipe.task_kwargs)
-    for item in a.task_arg:
-        key, sep, value = item.partition("=")
-        if not sep:
-            ap.error(f"--task-arg needs KEY=VALUE, got {item!r}")
-        task_kwargs[key] = json.loads(value)
-    recipe = dataclasses.replace(recipe, task_kwargs=task_kwargs, **changes)
+    try:
+        given = parse_task_args(a.task_arg)  # hrlp train's own reading of --task-arg (JSON values, else strings)
+    except ValueError as e:
+        ap.error(str(e))
+    recipe = dataclasses.replace(recipe, task_kwargs={**recipe.task_kwargs, **given}, **changes)
     cfg = ImitationConfig(a.expert_episodes, a.dagger_rounds, a.dagger_episodes, a.epochs, a.minibatch,
                           noisy_expert_episodes=a.noisy_expert_episodes, expert_noise=a.expert_noise, beta=a.beta,
                           eval_episodes=a.eval_episodes)  # fmt: skip

@@ -107,10 +107,10 @@ def _handover(config: TrainConfig) -> TrainConfig:
 
 
 def _relative_only(config: TrainConfig, reacher: str) -> TrainConfig:
-    """:func:`_handover`'s config with ``reacher`` in place of ``reacher`` and only the goals made capsule-relative: a
-    Reacher trained to hand over needs neither the approach drive nor the claw held open."""
-    assert config.macro is not None
+    """:func:`_handover`'s config with the skill ``reacher`` in place of the paper's Reacher and only the goals made
+    capsule-relative: a Reacher trained to hand over needs neither the approach drive nor the claw held open."""
     config = _handover(config)
+    assert config.macro is not None
     skills = tuple(reacher if s == "reacher" else s for s in config.macro.skills)
     return replace(config, macro=replace(config.macro, skills=skills, handover=Handover(approach_height=0.0, open_torque=0.0)))
 
