@@ -1099,7 +1099,7 @@ def skills_list(library: _LIBRARY = None) -> None:
     if not lib.root.is_dir():
         err_console.print(f"note: no library at {escape(str(lib.root))} yet ('hrlp skills add' makes it): shipped skills only")
     table = Table(title=escape(f"skills in {lib.root} and shipped with hrlp"))
-    for col in ("name", "task", "params", "k", "trained steps", "sha256", "from"):
+    for col in ("name", "task", "params", "features", "k", "trained steps", "sha256", "from"):
         table.add_column(col)
     seen: set[str] = set()
     broken: list[str] = []
@@ -1111,11 +1111,11 @@ def skills_list(library: _LIBRARY = None) -> None:
             try:
                 m = source.manifest(name)
             except ValueError as e:  # CheckpointError included: one entry's problem, not the listing's
-                table.add_row(escape(name), "[red]broken[/]", "", "", "", "", where)
+                table.add_row(escape(name), "[red]broken[/]", "", "", "", "", "", where)
                 broken.append(str(e))
                 continue
-            table.add_row(name, m["task"], str(m["param"]["dim"]), str(m["k"]), f"{m['trained']['env_steps']:,}",
-                          m["sha256"][:12], where)  # fmt: skip
+            table.add_row(name, m["task"], str(m["param"]["dim"]), ", ".join(m.get("features", [])) or "-", str(m["k"]),
+                          f"{m['trained']['env_steps']:,}", m["sha256"][:12], where)  # fmt: skip
     console.print(table)
     for reason in broken:
         err_console.print(f"[yellow]broken:[/] {escape(reason)}")

@@ -316,6 +316,13 @@ def build_bad_skill_files(root: Path) -> BadSkillFiles:
     skill("hidden-not-list", "hidden '64,64'", "'hidden'", edit=set_key("hidden", "64,64"))
     skill("hidden-zero", "a hidden layer of width 0", "'hidden'", edit=set_key("hidden", [0, 64]))
     skill("act-dim-other", "act_dim 8 for a 9-joint arm", "'act_dim'", edit=set_key("act_dim", 8))
+    # Named observation features: unknown names, a list that is not one, and features the weights were not trained on.
+    skill("features-unknown", "a feature no environment computes", "unknown observation feature",
+          edit=set_key("features", ["__import__('os')"]))  # fmt: skip
+    skill("features-not-list", "features given as a string", "must be a list", edit=set_key("features", "capsule_pose"))
+    skill("features-twice", "one feature named twice", "twice", edit=set_key("features", ["capsule_pose", "capsule_pose"]))
+    skill("features-unfitted", "features beside weights for 27 numbers", "'obs_dim'",
+          edit=set_key("features", ["capsule_pose"]))  # fmt: skip
     t = tensor_edit("policy.mean_net.0.weight", lambda w: w[:, :26])
     skill("block-misfit", "a first layer for 26 observations, not 27", "has shape", tensors=t)
     t = tensor_edit("normalizer.mean", lambda w: w[:20])

@@ -48,7 +48,7 @@ import mujoco
 import mujoco.rollout
 import numpy as np
 
-from hrlp.envs.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, ArmPhysics, PhysicsConfig, model_xml
+from hrlp.envs.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics, PhysicsConfig, model_xml
 from hrlp.envs.registry import TASKS, ArmEnvFactory
 from hrlp.envs.tasks import (
     GripperTask,
@@ -152,6 +152,13 @@ def capsule_pose_rows(m: Measurements) -> np.ndarray:
     """:meth:`ArmPhysics.capsule_pose_features` for ``N`` worlds: ``(a_x^2 - a_y^2, 2 a_x a_y, a_z^2, v_C)``, ``[N, 6]``."""
     x, y, z = m.capsule_axis[:, 0], m.capsule_axis[:, 1], m.capsule_axis[:, 2]
     return np.column_stack([x * x - y * y, 2.0 * x * y, z * z, m.capsule_vel])
+
+
+def feature_rows(name: str, m: Measurements) -> np.ndarray:
+    """:meth:`ArmPhysics.feature` for ``N`` worlds: the named observation feature, ``[N, width]``."""
+    if name == "capsule_pose":
+        return capsule_pose_rows(m)
+    raise ValueError(f"unknown observation feature {name!r} (known: {', '.join(OBS_FEATURES)})")
 
 
 def grip_terms_rows(reward: GripReward, sparse: SparseSuccess, m: Measurements) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -629,6 +636,11 @@ class BatchedArmEnv:
             physics_seconds=seconds,
         )
 
+    def features(self, name: str) -> np.ndarray:
+        """The named observation feature (:data:`~hrlp.envs.physics.OBS_FEATURES`) of every world's current state,
+        ``[N, width]`` (what a skill that reads it is given; :meth:`ArmPhysics.feature` for one world)."""
+        return np.array(feature_rows(name, self._measure()), dtype=np.float64)
+
     def reset_worlds(self, worlds: np.ndarray) -> np.ndarray:
         """Start the next episode of each world in ``worlds`` (indices), continuing its own random stream, as
         :meth:`step` does when an episode ends; returns their observations ``[len(worlds), obs_dim]``."""
@@ -720,6 +732,8 @@ class BatchedArmEnv:
         mujoco.mj_getState(m, io, self._state[i], _FULL)
         mujoco.mj_getState(m, io, self._mocap[i], _MOCAP)
         self._backend.load(i, io)
+        mujoco.mj_forward(m, io)  # the sensors of the new state, so that measurements (features()) are current
+        self._sens[i] = io.sensordata
 
     def _world_state(self, i: int) -> dict[str, Any]:
         self._backend.save(i, self._io)
@@ -801,6 +815,7 @@ __all__ = [
     "capsule_pose_rows",
     "claw_closure_rows",
     "dist_rows",
+    "feature_rows",
     "grip_terms_rows",
     "hand_to_capsule_axis_rows",
     "make_batched",

@@ -36,6 +36,11 @@ N_JOINTS = len(JOINTS)
 ARM_JOINTS = 7
 #: Base observation size (paper, Appendix B.1): 9 angles, 9 velocities, hand H, capsule C.
 BASE_OBS_DIM = 2 * N_JOINTS + 3 + 3
+#: Named observation features beyond the 24 base numbers, by name: their width. A task may append them to its
+#: observation (``GripperTask.observe_capsule``) and a skill trained on it reads them wherever it acts, computed from
+#: the physics by :meth:`ArmPhysics.feature` (one world) or :func:`hrlp.envs.batched.feature_rows` (N worlds).
+#: ``capsule_pose``: :meth:`ArmPhysics.capsule_pose_features`.
+OBS_FEATURES: dict[str, int] = {"capsule_pose": 6}
 #: The arm's base axis is the vertical line through the shoulder; start circles are centred on it.
 BASE_AXIS_XY = np.array([-0.15, 0.0])
 #: Height of the capsule's centre when it lies on the table (its radius).
@@ -173,6 +178,13 @@ class ArmPhysics:
         out[0], out[1], out[2] = x * x - y * y, 2.0 * x * y, z * z
         out[3:6] = self.data.qvel[N_JOINTS : N_JOINTS + 3]  # the free joint's linear velocity, world frame
         return out
+
+    def feature(self, name: str) -> np.ndarray:
+        """The named observation feature (:data:`OBS_FEATURES`) of the current state, ``[width]``; ValueError for an
+        unknown name."""
+        if name == "capsule_pose":
+            return self.capsule_pose_features(np.empty(OBS_FEATURES[name]))
+        raise ValueError(f"unknown observation feature {name!r} (known: {', '.join(OBS_FEATURES)})")
 
     @property
     def target(self) -> np.ndarray:

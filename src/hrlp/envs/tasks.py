@@ -65,6 +65,9 @@ class Task(abc.ABC):
 
     #: Numbers appended after the 24 base observations (e.g. the Reacher's goal).
     extra_obs_dim: int = 0
+    #: Named observation features (:data:`hrlp.envs.physics.OBS_FEATURES`) that end the extra observations, in order: a
+    #: skill trained on the task is given them wherever it acts (a Manager's environment computes them from its physics).
+    observed_features: tuple[str, ...] = ()
     #: Names of per-step quantities the environment sums over the episode and reports in ``info``.
     tracked: tuple[str, ...] = ()
     #: Names of per-step quantities whose largest value over the episode (from its start state on) the environment
@@ -462,6 +465,11 @@ class GripperTask(Task):
     def extra_obs_dim(self) -> int:  # type: ignore[override]
         """6 with :attr:`observe_capsule`, else 0."""
         return 6 if self.observe_capsule else 0
+
+    @property
+    def observed_features(self) -> tuple[str, ...]:  # type: ignore[override]
+        """``("capsule_pose",)`` with :attr:`observe_capsule`, else none."""
+        return ("capsule_pose",) if self.observe_capsule else ()
 
     def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
         if self.observe_capsule:

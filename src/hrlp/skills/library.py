@@ -10,10 +10,10 @@ and each failure is one line naming the skill:
 * both files are regular files, opened without following links and without blocking (a FIFO or ``/dev/zero`` is
   refused at once), no larger than :data:`SKILL_LIMITS`, the manifest at most 16 levels deep, and the weights' sha256
   is the manifest's;
-* the manifest's numbers are checked against the task's declared layout (``obs_dim`` = 24 + the parameters,
-  ``act_dim`` = 9), against bounds (``k`` an integer from 1 to :data:`MAX_K`), and against the tensors' dtypes and
-  shapes in the safetensors header, before any tensor or network is allocated: every weight is floating point and
-  its shape is the one the manifest's network needs;
+* the manifest's numbers are checked against the task's declared layout (``obs_dim`` = 24 + the parameters + the
+  widths of the named observation features it reads, ``act_dim`` = 9), against bounds (``k`` an integer from 1 to
+  :data:`MAX_K`), and against the tensors' dtypes and shapes in the safetensors header, before any tensor or network
+  is allocated: every weight is floating point and its shape is the one the manifest's network needs;
 * every weight and statistic is finite (no NaN or inf) and the normaliser's variances are non-negative.
 
 The library lives in ``$HRLP_SKILLS`` or ``~/.hrlp/skills``.
@@ -34,7 +34,7 @@ from hrlp.checkpoint import CheckpointError, ReadLimits, TensorInfo, load_module
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
 from hrlp.policies.mlp import GaussianPolicy
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.skills.skill import PARAM_SPECS, ParamSpec, Skill
+from hrlp.skills.skill import PARAM_SPECS, ParamSpec, Skill, check_features, features_dim
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 #: Bounds on a skill's files: a manifest is about 2 KB and 5 levels deep, the weights of a 64x64 skill 27 KB.
@@ -101,8 +101,17 @@ def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     if task not in PARAM_SPECS:
         raise ValueError(f"{run_dir}: a skill must be trained on one of {', '.join(PARAM_SPECS)}, this run trained {task}")
     require_keys(meta, {"obs_dim": int, "act_dim": int}, Path(run_dir) / "checkpoint" / META_FILE)
+    features: tuple[str, ...] = ()
+    if meta["obs_dim"] != BASE_OBS_DIM + PARAM_SPECS[task].dim:  # the task observed more: which named features
+        from hrlp.envs.registry import TASKS
+
+        features = TASKS[task].build(**cfg.task_kwargs).observed_features
+        if meta["obs_dim"] != (want := BASE_OBS_DIM + PARAM_SPECS[task].dim + features_dim(features)):
+            named = ", ".join(features) or "none"
+            raise ValueError(f"{run_dir}: its policy observes {meta['obs_dim']} numbers, a {task} skill {want} (24, its "
+                             f"parameters and its task's named features: {named})")  # fmt: skip
     kept = {k: v for k, v in tensors.items() if k.startswith(("policy.", "normalizer."))}
-    return kept, {"task": task, "source": meta}
+    return kept, {"task": task, "source": meta, "features": list(features)}
 
 
 def _param_spec(manifest: dict[str, Any]) -> ParamSpec:
@@ -137,21 +146,27 @@ def _integer(m: dict[str, Any], key: str, low: int, high: int, what: str) -> int
     return value
 
 
-def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...]]:
-    """``(param, k, hidden)`` of a skill's manifest, whose every number is checked; raises :class:`_SkillProblem`."""
+def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...], tuple[str, ...]]:
+    """``(param, k, hidden, features)`` of a skill's manifest, whose every number is checked; raises
+    :class:`_SkillProblem`. A manifest without ``features`` (every skill written before them) reads none."""
     if m.get("kind") != "skill":
         raise _SkillProblem(f"not a skill (kind {_short(m.get('kind'))})")
     param = _param_spec(m)
     k = _integer(m, "k", 1, MAX_K, "default duration")
-    _integer(m, "obs_dim", BASE_OBS_DIM + param.dim, BASE_OBS_DIM + param.dim, f"observation size of a {m['task']} skill")
+    try:
+        features = check_features(m.get("features", []), "manifest's 'features'")
+    except ValueError as e:
+        raise _SkillProblem(_short(e, 200)) from None
+    obs_dim = BASE_OBS_DIM + param.dim + features_dim(features)
+    with_features = f" reading {', '.join(features)}" if features else ""
+    _integer(m, "obs_dim", obs_dim, obs_dim, f"observation size of a {m['task']} skill{with_features}")
     _integer(m, "act_dim", N_JOINTS, N_JOINTS, "torques of the arm's joints")
     hidden = m.get("hidden")
     if not isinstance(hidden, list) or not all(isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in hidden):
         raise _SkillProblem(f"manifest's 'hidden' must be a list of positive layer widths, got {_short(hidden)}")
     norm = m.get("normalizer")
-    if not isinstance(norm, dict) or norm.get("shape") != [BASE_OBS_DIM + param.dim]:
-        raise _SkillProblem(f"manifest's 'normalizer' must be an object with shape [{BASE_OBS_DIM + param.dim}], "
-                            f"got {_short(norm)}")  # fmt: skip
+    if not isinstance(norm, dict) or norm.get("shape") != [obs_dim]:
+        raise _SkillProblem(f"manifest's 'normalizer' must be an object with shape [{obs_dim}], got {_short(norm)}")
     clip, eps, frozen = norm.get("clip"), norm.get("eps", 1e-8), norm.get("frozen", False)
     if not (clip is None or (_number(clip) and clip > 0)) or not (_number(eps) and eps >= 0) or not isinstance(frozen, bool):
         raise _SkillProblem(f"manifest's normaliser settings are invalid (clip {_short(clip)}, eps {_short(eps)}, "
@@ -160,7 +175,7 @@ def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...]]
     if not isinstance(trained, dict) or not isinstance(trained.get("config"), dict):
         raise _SkillProblem(f"manifest's 'trained' must be an object holding the training 'config', got {_short(trained)}")
     _integer(trained, "env_steps", 0, 2**62, "environment steps it was trained for")
-    return param, k, tuple(hidden)
+    return param, k, tuple(hidden), features
 
 
 def _number(x: Any) -> bool:
@@ -289,6 +304,7 @@ class SkillLibrary:
             "task": facts["task"],
             "k": k,
             "param": PARAM_SPECS[facts["task"]].to_json(),
+            "features": facts["features"],
             "obs_dim": src["obs_dim"],
             "act_dim": src["act_dim"],
             "hidden": src["config"]["hidden"],
@@ -309,7 +325,7 @@ class SkillLibrary:
         """The named skill, frozen. Raises a one-line error naming the skill for a missing, tampered, truncated or
         degenerate one (module docstring); the network is built only from a manifest its tensors agree with."""
         tensors, m, sha256 = self._read(name)
-        param, k, hidden = _check_manifest(m)
+        param, k, hidden, features = _check_manifest(m)
         policy = GaussianPolicy(m["obs_dim"], m["act_dim"], hidden)
         stats = {key.removeprefix("normalizer."): v for key, v in tensors.items() if key.startswith("normalizer.")}
         try:
@@ -317,7 +333,7 @@ class SkillLibrary:
             norm = RunningNormalizer.from_config(m["normalizer"], stats)
         except ValueError as e:  # not expected after the checks; named all the same
             raise CheckpointError(f"skill {name!r} ({self.root / name}): {_short(e, 200)}") from None
-        return Skill(name, m["task"], param, k, policy, norm, sha256)
+        return Skill(name, m["task"], param, k, policy, norm, sha256, features)
 
 
 __all__ = [

@@ -248,20 +248,25 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
         obs, r, term, trunc, _ = zip(*rows, strict=True)
         return np.stack(obs), np.array(r, dtype=np.float64), np.array(term, dtype=bool), np.array(trunc, dtype=bool)
 
-    _, res = decide(envs[0], np.stack([e._obs for e in envs]), actions, step)
+    def features(name: str, idx: np.ndarray) -> np.ndarray:
+        return np.stack([envs[i].env.unwrapped.physics.feature(name) for i in idx])  # type: ignore[attr-defined]
+
+    _, res = decide(envs[0], np.stack([e._obs for e in envs]), actions, step, features)
     for e, o in zip(envs, res.obs, strict=True):
         e._obs = o.copy()
     return dataclasses.replace(res, infos=infos)
 
 
 def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
-           step: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
-           ) -> tuple[np.ndarray, MacroStep]:  # fmt: skip
+           step: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+           features: Callable[[str, np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, MacroStep]:  # fmt: skip
     """One Manager decision in ``N`` worlds from ``obs [N, obs_dim]``: the macro-action logic of :func:`step_macros`,
     over any low-level stepper. ``layout`` gives the macro-actions (skills, durations, parameter blocks, hand-over,
     gamma); ``step(running, torques)`` applies ``torques [M, 9]`` to the worlds ``running`` (indices) for one control
-    step and returns their ``(obs [M, obs_dim], rewards [M], terminated [M], truncated [M])``. Returns the choices and
-    the :class:`MacroStep` (``infos`` empty: the stepper keeps them)."""
+    step and returns their ``(obs [M, obs_dim], rewards [M], terminated [M], truncated [M])``; ``features(name, idx)``
+    gives the named observation feature of the worlds ``idx`` in their current state, ``[M, width]``, for the skills that
+    read features (:attr:`Skill.features`). Returns the choices and the :class:`MacroStep` (``infos`` empty: the stepper
+    keeps them)."""
     first = layout
     n, width = len(obs), 1 + int(first.offsets[-1])
     a = np.asarray(actions, dtype=np.float64)
@@ -302,7 +307,13 @@ def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
                 off = np.linalg.norm(obs[idx, _HAND_XY] - block[:, :2], axis=1)
                 lifted[idx] &= off >= h.approach_radius
                 block = block + np.outer(lifted[idx], (0.0, 0.0, h.approach_height))
-            torques[idx] = first.skills[s].act(obs[idx, :BASE_OBS_DIM], block)
+            skill = first.skills[s]
+            seen = None
+            if skill.features:
+                if features is None:
+                    raise ValueError(f"skill {skill.name} reads observation features; this stepper gives none")
+                seen = np.concatenate([features(f, idx) for f in skill.features], axis=1)
+            torques[idx] = skill.act(obs[idx, :BASE_OBS_DIM], block, seen)
             if h is not None and h.open_torque > 0:
                 torques[idx, N_JOINTS - 2 :] = (-h.open_torque, h.open_torque)
         obs[running], r, term, trunc = step(running, torques[running])
@@ -511,7 +522,10 @@ class BatchedMacroVectorEnv:
             success[running] = out.success[running]
             return out.next_obs[running], out.rewards[running], out.terminated[running], out.truncated[running]
 
-        _, res = decide(self.layout, self._obs, actions, step)
+        def features(name: str, idx: np.ndarray) -> np.ndarray:
+            return worlds.features(name)[idx]
+
+        _, res = decide(self.layout, self._obs, actions, step, features)
         next_obs = res.obs
         obs = next_obs.copy()
         ended = np.flatnonzero(res.terminated | res.truncated)

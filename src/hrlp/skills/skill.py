@@ -3,17 +3,20 @@
 Section 1.1: "the Manager ... selects one of N available macro-actions and passes a vector of
 parameters to the selected macro-action". A skill's parameters enter its observation where its
 training task put them (the Reacher's goal and the Mover's target at indices 24-26, after the
-24 base numbers), so a skill trained on a task can be driven by any Manager that sets them.
+24 base numbers), so a skill trained on a task can be driven by any Manager that sets them. A skill may also read
+named observation features after its parameters (:data:`~hrlp.envs.physics.OBS_FEATURES`, e.g. the capsule's pose for
+a Gripper trained with ``observe_capsule``): the environment it acts in computes them from its physics.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 
-from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
+from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS, OBS_FEATURES, ArmPhysics
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
 
@@ -91,7 +94,8 @@ HANDOVER_POINT = ParamSpec(3, (-0.05, -0.05, 0.0), (0.05, 0.05, 0.20), "offset o
 
 
 class Skill:
-    """A frozen skill: ``act(base_obs [N, 24], params [N, dim]) -> torques [N, 9]`` (the policy's mean action).
+    """A frozen skill: ``act(base_obs [N, 24], params [N, dim], features [N, F]) -> torques [N, 9]`` (the policy's mean
+    action).
 
     Attributes:
         name: the skill's name in the library.
@@ -99,12 +103,15 @@ class Skill:
         param: its parameter specification.
         k: its default duration in low-level steps.
         content_hash: sha256 of its weights file (changes if and only if the weights change).
+        features: the named observation features it reads after its parameters (:data:`OBS_FEATURES`; none for the
+            paper's skills), ``feature_dim`` numbers in all.
     """
 
     def __init__(self, name: str, task: str, param: ParamSpec, k: int, policy: GaussianPolicy,
-                 normalizer: RunningNormalizer, content_hash: str) -> None:  # fmt: skip
+                 normalizer: RunningNormalizer, content_hash: str, features: tuple[str, ...] = ()) -> None:  # fmt: skip
         if k < 1:
             raise ValueError(f"skill {name}: default duration k must be >= 1, got {k}")
+        self.features = check_features(features, f"skill {name}")
         self.name, self.task, self.param, self.k, self.content_hash = name, task, param, int(k), content_hash
         for p in policy.parameters():
             p.requires_grad_(False)  # frozen: a skill never enters a trust region
@@ -112,20 +119,56 @@ class Skill:
         normalizer.freeze()
         self.normalizer = normalizer
         self._mean = NumpyMLP(policy.mean_net)
-        self.obs_dim = BASE_OBS_DIM + param.dim
+        self.feature_dim = features_dim(self.features)
+        self.obs_dim = BASE_OBS_DIM + param.dim + self.feature_dim
 
-    def observation(self, base_obs: np.ndarray, params: np.ndarray) -> np.ndarray:
-        """The skill's own observation: the 24 base numbers with its parameters after them. [N, 24 + dim]"""
+    def observation(self, base_obs: np.ndarray, params: np.ndarray, features: np.ndarray | None = None) -> np.ndarray:
+        """The skill's own observation: the 24 base numbers, its parameters, then its features (in the order of
+        :attr:`features`). [N, obs_dim]"""
         base = np.asarray(base_obs, dtype=np.float64)
         if base.ndim != 2 or base.shape[1] < BASE_OBS_DIM:
             raise ValueError(f"skill {self.name}: base observations must have shape [N, >=24], got {base.shape}")
         p = np.asarray(params, dtype=np.float64).reshape(base.shape[0], self.param.dim)
-        return np.concatenate([base[:, :BASE_OBS_DIM], p], axis=1)
+        if not self.features:
+            return np.concatenate([base[:, :BASE_OBS_DIM], p], axis=1)
+        if features is None:
+            raise ValueError(f"skill {self.name} reads the observation features {', '.join(self.features)}; pass them "
+                             f"([N, {self.feature_dim}])")  # fmt: skip
+        f = np.asarray(features, dtype=np.float64)
+        if f.shape != (base.shape[0], self.feature_dim):
+            raise ValueError(f"skill {self.name}: features ({', '.join(self.features)}) must have shape "
+                             f"[{base.shape[0]}, {self.feature_dim}], got {list(f.shape)}")  # fmt: skip
+        return np.concatenate([base[:, :BASE_OBS_DIM], p, f], axis=1)
 
-    def act(self, base_obs: np.ndarray, params: np.ndarray) -> np.ndarray:
-        """Torques in [-1, 1] for ``N`` states: ``[N, 24] x [N, dim] -> [N, 9]``; rejects NaN/inf inputs."""
-        obs = self.observation(base_obs, params)
+    def features_of(self, physics: Sequence[ArmPhysics]) -> np.ndarray | None:
+        """The features this skill reads in each world's current state, ``[N, feature_dim]`` (None if it reads none)."""
+        if not self.features:
+            return None
+        return np.stack([np.concatenate([p.feature(f) for f in self.features]) for p in physics])
+
+    def act(self, base_obs: np.ndarray, params: np.ndarray, features: np.ndarray | None = None) -> np.ndarray:
+        """Torques in [-1, 1] for ``N`` states: ``[N, 24] x [N, dim] (x [N, feature_dim]) -> [N, 9]``; rejects NaN/inf
+        inputs, and missing or misshapen features for a skill that reads them."""
+        obs = self.observation(base_obs, params, features)
         if not np.isfinite(obs).all():
-            raise ValueError(f"skill {self.name}: observation or parameters contain NaN or inf")
+            raise ValueError(f"skill {self.name}: observation, parameters or features contain NaN or inf")
         a = self._mean(self.normalizer.normalize(obs))
         return np.clip(a, -1.0, 1.0).reshape(obs.shape[0], N_JOINTS)
+
+
+def check_features(features: object, who: str) -> tuple[str, ...]:
+    """``features`` as a tuple of distinct known feature names (:data:`OBS_FEATURES`); a one-line ValueError naming
+    ``who`` otherwise."""
+    if not isinstance(features, list | tuple) or not all(isinstance(f, str) for f in features):
+        raise ValueError(f"{who}: features must be a list of feature names, got {features!r}")
+    if unknown := [f for f in features if f not in OBS_FEATURES]:
+        raise ValueError(f"{who}: unknown observation feature(s) {', '.join(map(repr, unknown))} "
+                         f"(known: {', '.join(OBS_FEATURES)})")  # fmt: skip
+    if len(set(features)) != len(features):
+        raise ValueError(f"{who}: features {list(features)} name one feature twice")
+    return tuple(features)
+
+
+def features_dim(features: tuple[str, ...]) -> int:
+    """How many numbers the named features take: the sum of their widths in :data:`OBS_FEATURES`."""
+    return sum(OBS_FEATURES[f] for f in features)
