@@ -71,8 +71,19 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
             assert r.paper == (fig6 if "-1-" in name else fig7)[r.name]
     assert len(PRESETS["reach-and-grip-2-handover"].runs) == 12
     assert all(r.config.macro is None or r.config.macro.handover is None
-               for p in PRESETS.values() if "handover" not in p.name and p.name != "reach-and-grip-1-samples"
-               for r in p.runs)  # fmt: skip
+               for p in PRESETS.values() if "handover" not in p.name
+               and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated") for r in p.runs)  # fmt: skip
+    # The imitated grid is the reacher-handover grid and the tuned gripper + micro cells with gripper-imitated in place
+    # of the gripper, and nothing else.
+    reacher_handover = {r.name: r.config for r in PRESETS["reach-and-grip-2-reacher-handover"].runs}
+    imitated = PRESETS["reach-and-grip-2-imitated"].runs
+    assert len(imitated) == 12
+    for r in imitated:
+        plain = r.name.replace("gripper-imitated", "gripper")
+        base = reacher_handover.get(plain) or tuned[plain].config
+        assert r.config.macro.skills == tuple(s.replace("gripper", "gripper-imitated") for s in base.macro.skills), r.name
+        assert replace(r.config, macro=replace(r.config.macro, skills=base.macro.skills)) == base, r.name
+        assert r.paper == fig7[plain.replace("reacher-handover", "reacher")], r.name
     # The samples preset's Manager is Figure 6's hand-over cell exactly (its runs can be shared); its flat run has the
     # paper's settings on the same task and reward.
     samples, fig6_handover = PRESETS["reach-and-grip-1-samples"], PRESETS["reach-and-grip-1-handover"]
@@ -177,3 +188,33 @@ def test_ray_backend_runs_the_same_grid_on_a_local_ray_instance(tmp_path):
     finally:
         ray.shutdown()
     assert len(results) == 2 and all((tmp_path / "tiny-ray" / r["run"] / "s0" / "result.json").exists() for r in results)
+
+
+def test_a_run_with_an_imitation_stage_starts_from_the_student_and_is_never_confused_with_one_without(tmp_path):
+    from hrlp.skills.imitate import ImitationConfig
+
+    cfg = TrainConfig(task="Gripper", batch_steps=60, num_envs=2, episode_steps=15, workers=1)
+    imitation = ImitationConfig(expert_episodes=2, dagger_rounds=0, epochs=1, minibatch=16)
+    student = Preset("student", "imitated", "test", (Run("g", cfg, imitation=imitation),), seeds=(0,), budget=60,
+                     eval_episodes=2)  # fmt: skip
+    (result,) = reproduce(student, tmp_path, workers=1)
+    run = tmp_path / "student" / "g" / "s0"
+    assert result["imitation"] == json.loads(json.dumps(vars(imitation))) and result["env_steps"] == 60
+    assert json.loads((run / "imitation.json").read_text())["rounds"][0]["states"] == 2 * 15  # two expert episodes
+    # TRPO continued the student: its first logged iteration is the one after imitation's iteration 0.
+    assert read_progress(run)["iteration"].tolist() == [1]
+    # The same config without imitation is another run: trained, not copied; and the other way round.
+    plain = {r["run"]: r for r in reproduce(replace(student, name="plain", runs=(Run("g", cfg),)), tmp_path, workers=1)}
+    assert "copied_from" not in plain["g"] and plain["g"]["imitation"] is None
+    again = {r["run"]: r for r in reproduce(replace(student, name="again"), tmp_path, workers=1)}
+    assert again["g"]["copied_from"] == "student/g/s0"
+
+
+def test_only_runs_the_runs_whose_names_match_and_a_pattern_that_matches_nothing_is_refused(tmp_path):
+    results = reproduce(_tiny(), tmp_path, workers=1, only=("norm*",))
+    assert sorted((r["run"], r["seed"]) for r in results) == [("normal", 0), ("normal", 1)]
+    assert not (tmp_path / "tiny" / "stabilised").exists()
+    with pytest.raises(ValueError, match=r"--only 'stab' matches no run of tiny \(runs: normal, stabilised\)"):
+        reproduce(_tiny(), tmp_path, workers=1, only=("normal", "stab"))
+    r = CliRunner().invoke(app, ["reproduce", "reach-and-grip-2", "--out", str(tmp_path), "--only", "gripper+nothing*"])
+    assert r.exit_code == 2 and "--only 'gripper+nothing*' matches no run of reach-and-grip-2" in r.output, r.output

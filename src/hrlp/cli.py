@@ -273,6 +273,10 @@ def reproduce(
     reuse: Annotated[
         bool, typer.Option(help="Copy a run whose config matches a finished run of another preset under OUT.")
     ] = True,
+    only: Annotated[
+        list[str] | None,
+        typer.Option(help="Run only the runs whose name matches this shell pattern, e.g. '*,c2=3,tr=0.03'; repeatable."),
+    ] = None,
 ) -> None:
     """Run a preset's runs x seeds grid; finished runs are skipped, interrupted ones resume, runs another preset
     already finished with the same config are copied."""
@@ -299,7 +303,8 @@ def reproduce(
         )
         err_console.print(f"{r['preset']} / {r['run']} / seed {r['seed']}: {what}, {r['env_steps']:,} steps{note}")
 
-    results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse)
+    results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse,
+                       only=tuple(only or ()))  # fmt: skip
     console.print(f"{len(results)} runs of {preset} in {out / preset}; tables: hrlp tables --root {out}")
 
 

@@ -25,7 +25,8 @@ from hrlp.train import TrainConfig, load_policy, train
 LOAD_KINDS = ("weights-fifo", "meta-fifo", "weights-dev-zero", "meta-huge", "meta-deep", "obs-dim-huge", "hidden-huge",
               "block-misfit", "weights-nan", "weights-int", "k-fraction", "entry-linked-outside", "name-parent",
               "name-absolute", "weights-pickle")  # fmt: skip
-SHIPPED = ("gripper", "mover-noised", "mover-plain", "reacher", "reacher-handover", "reacher3d", "s-reacher")
+SHIPPED = ("gripper", "gripper-imitated", "mover-noised", "mover-plain", "reacher", "reacher-handover", "reacher3d",
+           "s-reacher")  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +137,8 @@ def test_the_shipped_skills_still_load_and_act():
         skill = lib.load(name)
         recorded = json.loads((shipped_library_root() / name / META_FILE).read_text())["sha256"]
         assert skill.content_hash == recorded and skill.k in (8, 15)
-        torques = skill.act(torch.zeros(2, 24).numpy(), torch.zeros(2, skill.param.dim).numpy())
+        features = torch.zeros(2, skill.feature_dim).numpy() if skill.features else None
+        torques = skill.act(torch.zeros(2, 24).numpy(), torch.zeros(2, skill.param.dim).numpy(), features)
         assert torques.shape == (2, 9) and bool(torch.isfinite(torch.from_numpy(torques)).all())
 
 
@@ -166,7 +168,7 @@ def test_an_unknown_skill_is_reported_beside_the_real_entries(tmp_path, monkeypa
     assert f"(known: {', '.join(SHIPPED)})" in r.output
     r = runner.invoke(app, ["skills", "show", "reachr", "--library", str(tmp_path / "lib")])
     assert r.exit_code == 2 and f"(known: {', '.join(sorted([*SHIPPED, 'mine']))})" in r.output, r.output
-    with pytest.raises(ValueError, match=r"known: gripper, mine, mover-noised"):
+    with pytest.raises(ValueError, match=r"known: gripper, gripper-imitated, mine, mover-noised"):
         load_skill("reachr", tmp_path / "lib")
 
 

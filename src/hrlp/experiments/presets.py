@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 from hrlp.config import PAPER_SETTINGS, with_settings
+from hrlp.skills.imitate import ImitationConfig
 from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 from hrlp.train import TrainConfig
 
@@ -38,6 +39,10 @@ class Run:
     """This run's own budget, environment steps (None: the preset's ``budget``; ``--budget`` overrides both)."""
     skill: tuple[str, int] | None = None
     """For a run that trains a shipped skill: the skill's name and default duration k (``hrlp skills build``)."""
+    imitation: ImitationConfig | None = None
+    """For a run that starts from a student of the scripted grasp: the imitation (:func:`hrlp.skills.imitate.imitate`,
+    behaviour cloning and DAgger) written as the run's iteration 0, which TRPO then continues to the budget (None: TRPO
+    from a fresh network). Its expert and student episodes are not counted in the run's environment steps."""
 
 
 @dataclass(frozen=True)
@@ -106,13 +111,18 @@ def _handover(config: TrainConfig) -> TrainConfig:
     return replace(config, macro=replace(config.macro, handover=Handover()), init_log_std=-1.0)
 
 
+def _swap(config: TrainConfig, old: str, new: str) -> TrainConfig:
+    """A Manager's config with the skill ``new`` in place of ``old`` (its other settings kept)."""
+    assert config.macro is not None
+    return replace(config, macro=replace(config.macro, skills=tuple(new if s == old else s for s in config.macro.skills)))
+
+
 def _relative_only(config: TrainConfig, reacher: str) -> TrainConfig:
     """:func:`_handover`'s config with the skill ``reacher`` in place of the paper's Reacher and only the goals made
     capsule-relative: a Reacher trained to hand over needs neither the approach drive nor the claw held open."""
-    config = _handover(config)
+    config = _swap(_handover(config), "reacher", reacher)
     assert config.macro is not None
-    skills = tuple(reacher if s == "reacher" else s for s in config.macro.skills)
-    return replace(config, macro=replace(config.macro, skills=skills, handover=Handover(approach_height=0.0, open_torque=0.0)))
+    return replace(config, macro=replace(config.macro, handover=Handover(approach_height=0.0, open_torque=0.0)))
 
 
 def _kl(config: TrainConfig, max_kl: float) -> TrainConfig:
@@ -196,21 +206,29 @@ def _appendix_c_tuned() -> tuple[Preset, ...]:
     )
 
 
+#: The imitated Gripper's imitation (docs/results/README.md, "Imitation, then TRPO"): 150 expert episodes and 250 with
+#: DART noise of std 0.3, two DAgger rounds of 200 episodes (the expert acting with probability 0.5, then 0.25), 30 epochs
+#: per fit on minibatches of 512, the best round's student (100 episodes alone) kept.
+IMITATED_GRIPPER = ImitationConfig(expert_episodes=150, dagger_rounds=2, dagger_episodes=200, epochs=30, minibatch=512,
+                                   noisy_expert_episodes=250, expert_noise=0.3, beta=0.5, eval_episodes=100)  # fmt: skip
+
+
 def _shipped_skills() -> Preset:
     """The recipes of the skills shipped in ``src/hrlp/skills/pretrained/`` (``hrlp skills build`` trains them and adds
     them to a library; a test checks that every shipped skill's manifest records exactly its run's config)."""
+    gripper = _flat("Gripper", 25_000, episode_steps=100, init_log_std=-1.0, task_kwargs={**GRIPPER_START, "c3": -8, "c4": 10})
     return Preset(
         "shipped-skills",
         "the shipped skills: Reacher; Gripper from many close, open-claw starts (c3 -8 and a bonus c4 10 while gripped: "
         "with the paper's three-term reward alone it hovers); Reacher3D; ReacherStabilised (level_coeff 0.1: with 0.5 no "
         "goal near the table is reached); the Movers from grip starts (scripts/make_mover_starts.py records them from "
         "the Gripper); a Reacher trained for hand-over (ReacherHandover: pre-grasp goals above the capsule, the capsule left "
-        "in place, the claw open); docs/skills.md",
+        "in place, the claw open); a Gripper seeing the capsule's pose, imitated from the scripted grasp, then TRPO; "
+        "docs/skills.md",
         "Section 4.1",
         (
             Run("reacher", _flat("Reacher", 25_000), steps=3_000_000, skill=("reacher", 15)),
-            Run("gripper", _flat("Gripper", 25_000, episode_steps=100, init_log_std=-1.0,
-                                 task_kwargs={**GRIPPER_START, "c3": -8, "c4": 10}), steps=8_000_000, skill=("gripper", 15)),
+            Run("gripper", gripper, steps=8_000_000, skill=("gripper", 15)),
             Run("reacher3d", _flat("Reacher3D", 25_000), steps=2_000_000, skill=("reacher3d", 15)),
             Run("s-reacher", _flat("ReacherStabilised", 25_000, task_kwargs={"level_coeff": 0.1}), steps=2_000_000,
                 skill=("s-reacher", 15)),
@@ -222,6 +240,11 @@ def _shipped_skills() -> Preset:
             # the baseline by 10 L-BFGS iterations on every 4th step), in one process on the batched backend.
             Run("reacher-handover", TrainConfig(task="ReacherHandover", workers=1, backend="batched"), steps=10_000_000,
                 skill=("reacher-handover", 15)),
+            # The Gripper's recipe seeing the capsule's pose (a skill that reads the capsule_pose feature), 256 x 256, started
+            # from the scripted grasp's student (IMITATED_GRIPPER), then TRPO with log-std -2 on the batched backend.
+            Run("gripper-imitated", replace(gripper, hidden=(256, 256), init_log_std=-2.0, backend="batched",
+                                            task_kwargs={**gripper.task_kwargs, "observe_capsule": True}),
+                steps=8_000_000, skill=("gripper-imitated", 15), imitation=IMITATED_GRIPPER),
         ),
         seeds=(0,),
         budget=8_000_000,
@@ -359,6 +382,34 @@ PRESETS: dict[str, Preset] = {
                 )
                 for label, cells in _FIG7.items()
                 if label in ("gripper+reacher", "gripper+reacher+micro")
+                for (c2, tr), paper in cells.items()
+            ),
+            budget=3_000_000,
+        ),
+        Preset(
+            "reach-and-grip-2-imitated",
+            "Figure 7's grid (Experiment 2, k = 15) with the imitated Gripper (gripper-imitated: it sees the capsule's pose) "
+            "in place of the paper's, beside the Reacher trained for hand-over as in reach-and-grip-2-reacher-handover, "
+            "and with the micro-action as in the headline; the headline's Manager settings; paper: its figure for the same "
+            "set with its own skills",
+            "Section 4.3.1, Figure 7",
+            tuple(
+                Run(
+                    f"{label.replace('gripper', 'gripper-imitated').replace('reacher', 'reacher-handover')},c2={c2},tr={tr}",
+                    _swap(
+                        replace(
+                            _tuned_manager(*_FIG7_SKILLS[label])
+                            if label == "gripper+micro"
+                            else _relative_only(_tuned_manager(*_FIG7_SKILLS[label]), "reacher-handover"),
+                            task_kwargs={"c2": c2, "tr": tr},
+                        ),
+                        "gripper",
+                        "gripper-imitated",
+                    ),
+                    paper,
+                )
+                for label, cells in _FIG7.items()
+                if label in ("gripper+reacher", "gripper+reacher+micro", "gripper+micro")
                 for (c2, tr), paper in cells.items()
             ),
             budget=3_000_000,

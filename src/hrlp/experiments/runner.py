@@ -14,6 +14,7 @@ second fails with a one-line error naming the run directory (and the jobs it has
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import os
 import re
@@ -22,7 +23,7 @@ import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ from hrlp import bounds
 from hrlp.atomic import LOCK_FILE, atomic_path, directory_lock
 from hrlp.checkpoint import checkpoint_exists
 from hrlp.experiments.presets import PRESETS, Preset
+from hrlp.skills.imitate import ImitationConfig
 from hrlp.train import TrainConfig
 
 BACKENDS = ("process", "ray")
@@ -48,6 +50,8 @@ class Job:
     config: TrainConfig
     eval_episodes: int
     paper: float | None
+    imitation: ImitationConfig | None = None
+    """The run's imitation stage before TRPO (:attr:`hrlp.experiments.presets.Run.imitation`), or None."""
 
 
 def run_dir_name(run: str) -> str:
@@ -66,6 +70,7 @@ def plan(preset: Preset, out: Path, seeds: tuple[int, ...] | None = None) -> lis
             preset.config(r, s),
             preset.eval_episodes,
             r.paper,
+            r.imitation,
         )
         for r in preset.runs
         for s in (seeds if seeds is not None else preset.seeds)
@@ -96,9 +101,15 @@ def find_same_run(job: Job) -> Path | None:
             found = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError):
             continue
-        if _same_config(found.get("config"), want) and found.get("env_steps", 0) >= job.config.steps:
+        if (_same_config(found.get("config"), want) and found.get("env_steps", 0) >= job.config.steps
+                and found.get("imitation") == _imitation_json(job)):  # fmt: skip
             return path.parent
     return None
+
+
+def _imitation_json(job: Job) -> dict[str, Any] | None:
+    """The job's imitation stage as ``result.json`` records it (None for a run that TRPO trains from scratch)."""
+    return None if job.imitation is None else json.loads(json.dumps(asdict(job.imitation)))
 
 
 def _same_config(found: Any, want: dict[str, Any]) -> bool:
@@ -165,6 +176,12 @@ def _run_job_locked(job: Job, reuse: bool) -> dict[str, Any]:
         return copy_run(job, source)
     torch.set_num_threads(1)
     label, started = f"{job.preset} / {job.run} / seed {job.seed}", time.perf_counter()
+    if job.imitation is not None and not resume:  # the student of the scripted grasp, as the run's iteration 0
+        from hrlp.skills.imitate import imitate
+
+        imitate(job.config, job.run_dir, job.imitation,
+                log=lambda line: print(f"{label}: {line}", file=sys.stderr, flush=True))  # fmt: skip
+        resume = True
     for st in train(job.config, job.run_dir, resume=resume):  # a line per iteration: jobs run in parallel, bars would mix
         print(progress_line(label, st, job.config.steps, time.perf_counter() - started), file=sys.stderr, flush=True)
     t0 = time.perf_counter()
@@ -187,6 +204,7 @@ def _run_job_locked(job: Job, reuse: bool) -> dict[str, Any]:
         "macro_usage": ev.macro_usage,
         "move": None if ev.move is None else {k: vars(v) for k, v in vars(ev.move).items()},
         "paper": job.paper,
+        "imitation": _imitation_json(job),
     }
     _write_json(job.run_dir / "result.json", result)
     return result
@@ -207,10 +225,12 @@ def reproduce(
     address: str | None = None,
     on_result: Callable[[dict[str, Any]], None] | None = None,
     reuse: bool = True,
+    only: tuple[str, ...] = (),
 ) -> list[dict[str, Any]]:
     """Run every job of the preset (a name or a :class:`Preset`; its first ``seeds`` seeds, ``budget`` steps each)
     and return their results. With ``reuse``, a job whose config matches a finished run of another preset under
-    ``out`` is copied from it (:func:`find_same_run`) rather than trained again.
+    ``out`` is copied from it (:func:`find_same_run`) rather than trained again. ``only``: shell-style patterns
+    (``fnmatch``) of the run names to run, e.g. ``"*,c2=3,tr=0.03"`` (default: every run); each must match one.
 
     Raises ValueError for an unknown preset, backend or bad numbers, and for a missing skill, before any compute.
     """
@@ -229,6 +249,12 @@ def reproduce(
     if address is not None and (problem := bounds.ray_address_problem(address)) is not None:
         raise ValueError(problem)
     preset = PRESETS[preset_name] if isinstance(preset_name, str) else preset_name
+    if only:
+        names = [r.name for r in preset.runs]
+        if unmatched := [pat for pat in only if not fnmatch.filter(names, pat)]:
+            raise ValueError(f"--only {', '.join(map(repr, unmatched))} matches no run of {preset.name} (runs: "
+                             f"{', '.join(names)})")  # fmt: skip
+        preset = replace(preset, runs=tuple(r for r in preset.runs if any(fnmatch.fnmatchcase(r.name, p) for p in only)))
     if budget is not None:
         preset = preset.with_budget(budget)
     jobs = plan(preset, out, None if seeds is None else tuple(range(seeds)))
