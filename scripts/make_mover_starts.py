@@ -1,8 +1,11 @@
-"""Record the Mover's "grip" start states from the shipped Gripper skill (``src/hrlp/envs/assets/mover_starts.npz``).
+"""Record the Mover's start states from a Gripper skill (``src/hrlp/envs/assets/mover_starts.npz``).
 
     python scripts/make_mover_starts.py [--states 2000] [--seed 0] [--out src/hrlp/envs/assets/mover_starts.npz]
+    python scripts/make_mover_starts.py --held      # the "held" starts, src/hrlp/envs/assets/mover_held_starts.npz
 
-plain: the capsule within 0.2 rad of straight ahead; noised: anywhere on the circle (hrlp.skills.starts).
+plain: the capsule within 0.2 rad of straight ahead; noised: anywhere on the circle (hrlp.skills.starts). The grip
+starts follow the shipped ``gripper``'s successful episodes from start to end; the held starts (``--held``) keep the
+states of ``gripper-imitated``'s episodes in which the capsule is in the claw.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import argparse
 import math
 from pathlib import Path
 
+from hrlp.envs.tasks import MOVER_HELD_STARTS_FILE, MOVER_STARTS_FILE
 from hrlp.skills.library import load_skill
 from hrlp.skills.starts import record_grip_starts, write_start_bank
 
@@ -18,13 +22,17 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--states", type=int, default=2000, help="states per variant")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=Path("src/hrlp/envs/assets/mover_starts.npz"))
+    ap.add_argument("--held", action="store_true", help="only states with the capsule held, from gripper-imitated")
+    ap.add_argument("--out", type=Path, default=None, help="default: the package's asset for the chosen start set")
     args = ap.parse_args()
-    gripper = load_skill("gripper")
+    out = args.out or Path("src/hrlp/envs") / (MOVER_HELD_STARTS_FILE if args.held else MOVER_STARTS_FILE)
+    skill = "gripper-imitated" if args.held else "gripper"
+    gripper = load_skill(skill)
     banks = {}
     for name, angle_range, seed in (("plain", 0.2, args.seed), ("noised", math.pi, args.seed + 1000)):
-        banks[name] = record_grip_starts(gripper, angle_range, args.states, seed=seed)
-        print(f"{name}: {len(banks[name][0])} states")
-    meta = {"skill": "gripper", "skill_sha256": gripper.content_hash, "states": str(args.states), "seed": str(args.seed),
-            "command": f"python scripts/make_mover_starts.py --states {args.states} --seed {args.seed}"}  # fmt: skip
-    print("wrote", write_start_bank(args.out, banks, meta))
+        banks[name] = record_grip_starts(gripper, angle_range, args.states, seed=seed, held=args.held)
+        print(f"{name}: {len(banks[name][0])} states", flush=True)
+    held = " --held" if args.held else ""
+    meta = {"skill": skill, "skill_sha256": gripper.content_hash, "states": str(args.states), "seed": str(args.seed),
+            "held": str(args.held), "command": f"python scripts/make_mover_starts.py --states {args.states} --seed {args.seed}{held}"}  # fmt: skip
+    print("wrote", write_start_bank(out, banks, meta))

@@ -613,15 +613,19 @@ def _move_extremes(physics: ArmPhysics) -> tuple[float, float]:
 
 #: Where ``MoverTask(starts="grip")`` draws its starts from (``scripts/make_mover_starts.py`` writes it).
 MOVER_STARTS_FILE = "assets/mover_starts.npz"
-MOVER_STARTS = ("grip", "placed")
+#: Where ``MoverTask(starts="held")`` draws its starts from (``scripts/make_mover_starts.py --held`` writes it).
+MOVER_HELD_STARTS_FILE = "assets/mover_held_starts.npz"
+MOVER_STARTS = ("grip", "placed", "held")
 
 
 @functools.cache
-def grip_starts(variant: str) -> tuple[np.ndarray, np.ndarray]:
-    """The recorded ``(qpos [S, nq], qvel [S, nv])`` start states of the Mover ``variant`` (read without pickle)."""
+def grip_starts(variant: str, held: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The recorded ``(qpos [S, nq], qvel [S, nv])`` start states of the Mover ``variant`` (read without pickle):
+    along a Gripper skill's successful episodes, or with ``held`` only those with the capsule in the claw."""
     from importlib import resources
 
-    with resources.files("hrlp.envs").joinpath(MOVER_STARTS_FILE).open("rb") as f, np.load(f, allow_pickle=False) as z:
+    name = MOVER_HELD_STARTS_FILE if held else MOVER_STARTS_FILE
+    with resources.files("hrlp.envs").joinpath(name).open("rb") as f, np.load(f, allow_pickle=False) as z:
         return z[f"{variant}_qpos"].astype(np.float64), z[f"{variant}_qvel"].astype(np.float64)
 
 
@@ -642,6 +646,8 @@ class MoverTask(Task):
       - placed: H 5.5-6.5 cm above the capsule's centre (plain; within 1 cm horizontally) or 5-10 cm
         from it in the upper half-space (noised), the claw at rest. Closer hand starts put a finger
         inside the capsule. From these starts a Mover never learned to grip (docs/skills.md).
+      - held: a state recorded along an episode of the ``gripper-imitated`` skill in which the capsule is in the claw
+        (Definition 1 holds): a Mover that only carries, after a Gripper has gripped.
     Success: d(C, T) < success_tol. Tracks d(C, T) so the episode's TargetDistSum is reported.
     """
 
@@ -654,7 +660,8 @@ class MoverTask(Task):
     success_tol: float = 0.03
     """A step succeeds when d(C, T) is below this, metres."""
     starts: str = "grip"
-    """'grip' (states along the Gripper skill's successful episodes) or 'placed' (hand placed by IK, claw at rest)."""
+    """'grip' (states along the Gripper skill's successful episodes), 'placed' (hand placed by IK, claw at rest) or
+    'held' (states with the capsule in the claw of the ``gripper-imitated`` skill)."""
     extra_obs_dim = 3
     tracked = ("target_dist",)
     tracked_max = MOVE_EXTREMES
@@ -672,8 +679,8 @@ class MoverTask(Task):
         return {"plain": "MoverPlain", "noised": "MoverNoised"}[self.variant]
 
     def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
-        if self.starts == "grip":
-            qpos, qvel = grip_starts(self.variant)
+        if self.starts in ("grip", "held"):
+            qpos, qvel = grip_starts(self.variant, held=self.starts == "held")
             i = int(rng.integers(len(qpos)))
             physics.set_state_vectors(qpos[i], qvel[i])
             physics.forward()

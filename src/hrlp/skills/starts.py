@@ -1,10 +1,12 @@
-"""Start states recorded from a frozen skill's rollouts: the Mover's "palm close to the capsule" starts.
+"""Start states recorded from a frozen skill's rollouts: the Mover's "palm close to the capsule" and "held" starts.
 
 The paper trains the Mover from starts with the palm close to the capsule (Section 4.1, Experiment 2). On this arm a
 Mover trained from hand-placed starts (claw at rest, 5-6.5 cm above the capsule) never learns to grip, and so never
 moves the capsule (docs/skills.md). :func:`record_grip_starts` runs the shipped Gripper skill from the Gripper task's
 close, open-claw starts and keeps the physics states of the episodes in which it grips the capsule, from their first
-step to their last: states on the way to a grip, and gripped ones. ``MoverTask(starts="grip")`` draws from them.
+step to their last: states on the way to a grip, and gripped ones. ``MoverTask(starts="grip")`` draws from them;
+``MoverTask(starts="held")`` from the states of ``gripper-imitated``'s episodes in which the capsule is held
+(``held=True``): a Mover that only has to carry.
 
 The states are stored as plain float arrays in an ``.npz`` file read with ``allow_pickle=False``.
 """
@@ -35,6 +37,7 @@ def record_grip_starts(
     every: int = 5,
     episode_steps: int = 100,
     num_envs: int = 16,
+    held: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Physics states ``(qpos [states, nq], qvel [states, nv])`` along the ``gripper``'s successful Gripper episodes.
@@ -43,7 +46,8 @@ def record_grip_starts(
     ``[-angle_range, angle_range]``; a skill acts with its mean action, a :class:`ScriptedGraspConfig` stands for the
     scripted grasp (:class:`~hrlp.skills.scripted.ScriptedGrasp`, one per environment): its states show a top-down
     approach and grip that a policy trained from them can start from (demonstration starts). Every ``every``-th state
-    of an episode in which Definition 1 held at some step is kept, until ``states`` are collected.
+    of an episode in which Definition 1 held at some step is kept, until ``states`` are collected; with ``held``, only
+    those in which it holds (the capsule in the claw: the starts of a Mover that carries what a Gripper gripped).
     ``progress(kept, episodes)`` is called after every finished episode.
     """
     if states < 1 or every < 1 or episode_steps < 1 or num_envs < 1:
@@ -72,7 +76,7 @@ def record_grip_starts(
     steps = [0] * num_envs
     while len(kept_q) < states:
         for i, env in enumerate(envs):
-            if steps[i] % every == 0:
+            if steps[i] % every == 0 and (not held or env.unwrapped.task.success(env.unwrapped.physics)):
                 d = env.unwrapped.physics.data
                 traj[i].append((d.qpos.copy(), d.qvel.copy()))
         actions = act(obs)
