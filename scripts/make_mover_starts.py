@@ -33,6 +33,7 @@ if __name__ == "__main__":
         banks[name] = record_grip_starts(gripper, angle_range, args.states, seed=seed, held=args.held)
         print(f"{name}: {len(banks[name][0])} states", flush=True)
     held = " --held" if args.held else ""
+    command = f"python scripts/make_mover_starts.py --states {args.states} --seed {args.seed}{held}"
     meta = {"skill": skill, "skill_sha256": gripper.content_hash, "states": str(args.states), "seed": str(args.seed),
-            "held": str(args.held), "command": f"python scripts/make_mover_starts.py --states {args.states} --seed {args.seed}{held}"}  # fmt: skip
+            "held": str(args.held), "command": command}  # fmt: skip
     print("wrote", write_start_bank(out, banks, meta))

@@ -72,7 +72,8 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     assert len(PRESETS["reach-and-grip-2-handover"].runs) == 12
     assert all(r.config.macro is None or r.config.macro.handover is None
                for p in PRESETS.values() if "handover" not in p.name
-               and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated") for r in p.runs)  # fmt: skip
+               and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated", "reach-and-grip-1-imitated",
+                                 "reach-and-move-imitated") for r in p.runs)  # fmt: skip
     # The imitated grid is the reacher-handover grid and the tuned gripper + micro cells with gripper-imitated in place
     # of the gripper, and nothing else.
     reacher_handover = {r.name: r.config for r in PRESETS["reach-and-grip-2-reacher-handover"].runs}
@@ -84,6 +85,23 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
         assert r.config.macro.skills == tuple(s.replace("gripper", "gripper-imitated") for s in base.macro.skills), r.name
         assert replace(r.config, macro=replace(r.config.macro, skills=base.macro.skills)) == base, r.name
         assert r.paper == fig7[plain.replace("reacher-handover", "reacher")], r.name
+    # reach-and-move with the imitated skills: reach (capsule-relative goals, the Reacher's own claw), grip, carry (the
+    # Mover's target a world point), with the headline's Manager settings; TargetDistSum beside the paper's best pair.
+    (carry,) = PRESETS["reach-and-move-imitated"].runs
+    assert carry.config.task == "ReachAndMove" and PRESETS["reach-and-move-imitated"].metric == "target_dist_sum"
+    assert carry.config.macro.skills == ("reacher-handover", "gripper-imitated", "mover-held") and carry.config.macro.k == 15
+    assert carry.config.macro.handover == Handover(approach_height=0.0, open_torque=0.0)
+    assert (carry.config.batch_steps, carry.config.trpo.max_kl, carry.config.init_log_std) == (2_000, 0.02, -1.0)
+    assert carry.paper == -41.470  # Figure 5's best cell, s-reacher + mover-noised
+    # Figure 6 with the imitated skills: each hand-over cell with reacher-handover (capsule-relative goals only) and
+    # gripper-imitated in place of the paper's skills, and nothing else.
+    for r in PRESETS["reach-and-grip-1-imitated"].runs:
+        plain = r.name.replace("gripper-imitated+reacher-handover", "gripper+reacher")
+        base = tuned_1[plain]
+        assert r.config.macro.skills == ("gripper-imitated", "reacher-handover") and r.config.macro.k == 10, r.name
+        assert r.config.macro.handover == Handover(approach_height=0.0, open_torque=0.0) and r.config.init_log_std == -1.0
+        assert replace(r.config, macro=replace(base.macro, handover=None), init_log_std=0.0) == base, r.name
+        assert r.paper == fig6[plain]
     # The samples preset's Manager is Figure 6's hand-over cell exactly (its runs can be shared); its flat run has the
     # paper's settings on the same task and reward.
     samples, fig6_handover = PRESETS["reach-and-grip-1-samples"], PRESETS["reach-and-grip-1-handover"]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from hrlp.envs import make
-from hrlp.envs.tasks import MOVER_STARTS_FILE, grip_starts
+from hrlp.envs.tasks import MOVER_HELD_STARTS_FILE, MOVER_STARTS_FILE, grip_starts
 from hrlp.skills.library import load_skill
 from hrlp.skills.starts import record_grip_starts, write_start_bank
 
@@ -45,6 +45,40 @@ def test_shipped_bank_matches_the_shipped_gripper_and_its_variants():
         assert np.median(angles) <= widest and (variant == "plain" or angles.max() > 2.5)
         gripped = np.mean([_gripped(env, q[i], v[i]) for i in range(0, len(q), 7)])
         assert 0.1 < gripped < 0.95  # on the way to a grip, and gripped
+
+
+def test_held_recording_keeps_only_states_with_the_capsule_in_the_claw():
+    gripper = load_skill("gripper-imitated")
+    q, v = record_grip_starts(gripper, math.pi, 40, seed=3, every=2, episode_steps=60, num_envs=4, held=True)
+    assert q.shape == (40, 16)
+    env = make("Gripper")
+    env.reset(seed=0)
+    assert all(_gripped(env, q[i], v[i]) for i in range(40))
+
+
+def test_shipped_held_bank_matches_gripper_imitated_and_every_state_is_held():
+    with resources.files("hrlp.envs").joinpath(MOVER_HELD_STARTS_FILE).open("rb") as f, np.load(f, allow_pickle=False) as z:
+        assert str(z["meta_skill_sha256"]) == load_skill("gripper-imitated").content_hash
+        assert str(z["meta_held"]) == "True"
+    env = make("Gripper")
+    env.reset(seed=0)
+    for variant in ("plain", "noised"):
+        q, v = grip_starts(variant, held=True)
+        assert len(q) >= 1000
+        assert all(_gripped(env, q[i], v[i]) for i in range(0, len(q), 23))
+
+
+def test_a_held_mover_start_keeps_the_capsule_while_the_claw_stays_closed():
+    env = make("MoverNoised", starts="held", episode_steps=30)
+    q, _ = grip_starts("noised", held=True)
+    for seed in range(3):
+        env.reset(seed=seed)
+        p = env.unwrapped.physics
+        assert np.abs(q - p.data.qpos).sum(axis=1).min() < 1e-5  # a recorded state, restored
+        assert 0.05 - 1e-9 <= p.target[2] - p.capsule[2] <= 0.20 + 1e-9
+        for _ in range(30):
+            env.step(np.r_[np.zeros(7), 1.0, -1.0])  # the arm limp, the fingers closing
+        assert p.finger_gap() < 0.03 and p.hand_to_capsule() < 0.05  # Definition 1 still holds
 
 
 def test_mover_grip_starts_restore_a_recorded_state_and_place_the_target():

@@ -223,8 +223,8 @@ def _shipped_skills() -> Preset:
         "with the paper's three-term reward alone it hovers); Reacher3D; ReacherStabilised (level_coeff 0.1: with 0.5 no "
         "goal near the table is reached); the Movers from grip starts (scripts/make_mover_starts.py records them from "
         "the Gripper); a Reacher trained for hand-over (ReacherHandover: pre-grasp goals above the capsule, the capsule left "
-        "in place, the claw open); a Gripper seeing the capsule's pose, imitated from the scripted grasp, then TRPO; "
-        "docs/skills.md",
+        "in place, the claw open); a Gripper seeing the capsule's pose, imitated from the scripted grasp, then TRPO; a "
+        "Mover from held starts (the capsule in that Gripper's claw); docs/skills.md",
         "Section 4.1",
         (
             Run("reacher", _flat("Reacher", 25_000), steps=3_000_000, skill=("reacher", 15)),
@@ -245,6 +245,11 @@ def _shipped_skills() -> Preset:
             Run("gripper-imitated", replace(gripper, hidden=(256, 256), init_log_std=-2.0, backend="batched",
                                             task_kwargs={**gripper.task_kwargs, "observe_capsule": True}),
                 steps=8_000_000, skill=("gripper-imitated", 15), imitation=IMITATED_GRIPPER),
+            # MoverNoised's recipe from the held starts (the capsule in gripper-imitated's claw): a Mover that carries what
+            # the Gripper gripped, one process on the batched backend.
+            Run("mover-held", replace(_flat("MoverNoised", 25_000, episode_steps=100, init_log_std=-1.0), workers=1,
+                                      backend="batched", task_kwargs={"starts": "held"}),
+                steps=6_000_000, skill=("mover-held", 15)),
         ),
         seeds=(0,),
         budget=8_000_000,
@@ -310,6 +315,24 @@ PRESETS: dict[str, Preset] = {
             metric="target_dist_sum",
         ),
         Preset(
+            "reach-and-move-imitated",
+            "reach-and-move, Manager over the hand-over Reacher, the imitated Gripper and the Mover from held starts "
+            "(reacher-handover + gripper-imitated + mover-held: reach, grip, carry), k = 15, the headline's Manager "
+            "settings; paper: its best pair (s-reacher + mover-noised)",
+            "Section 4.2.2, Figure 5",
+            (
+                Run(
+                    "reacher-handover+gripper-imitated+mover-held",
+                    _relative_only(
+                        _tuned(_manager("ReachAndMove", ("reacher", "gripper-imitated", "mover-held"), 15)), "reacher-handover"
+                    ),
+                    _FIG5["mover-noised"][1],
+                ),
+            ),
+            metric="target_dist_sum",
+            budget=3_000_000,
+        ),
+        Preset(
             "reach-and-grip-1",
             "reach-and-grip Experiment 1 (capsule fixed), Manager over gripper + reacher, k = 10, over the Gripper "
             "reward's c2 x tr",
@@ -336,6 +359,22 @@ PRESETS: dict[str, Preset] = {
                 for c2, tr in _GRID
             ),
             budget=1_000_000,
+        ),
+        Preset(
+            "reach-and-grip-1-imitated",
+            "Figure 6's grid (Experiment 1, k = 10, c2 x tr) with the skills made to hand over: the imitated Gripper "
+            "(gripper-imitated) and the Reacher trained for hand-over (reacher-handover, capsule-relative goals only); the "
+            "headline's Manager settings; paper: its figure with its own gripper + reacher",
+            "Section 4.3.1, Figure 6",
+            tuple(
+                Run(
+                    f"gripper-imitated+reacher-handover,c2={c2},tr={tr}",
+                    _swap(_relative_only(_tuned(_experiment_1(c2, tr)), "reacher-handover"), "gripper", "gripper-imitated"),
+                    _FIG6[(c2, tr)],
+                )
+                for c2, tr in _GRID
+            ),
+            budget=2_000_000,
         ),
         Preset(
             "reach-and-grip-1-samples",
