@@ -90,7 +90,7 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     (carry,) = PRESETS["reach-and-move-imitated"].runs
     assert carry.config.task == "ReachAndMove" and PRESETS["reach-and-move-imitated"].metric == "target_dist_sum"
     assert carry.config.macro.skills == ("reacher-handover", "gripper-imitated", "mover-held") and carry.config.macro.k == 15
-    assert carry.config.macro.handover == Handover(approach_height=0.0, open_torque=0.0)
+    assert carry.config.macro.handover == Handover(approach_height=0.0, open_torque=0.0, target_relative=True)
     assert (carry.config.batch_steps, carry.config.trpo.max_kl, carry.config.init_log_std) == (2_000, 0.02, -1.0)
     assert carry.paper == -41.470  # Figure 5's best cell, s-reacher + mover-noised
     # Figure 6 with the imitated skills: each hand-over cell with reacher-handover (capsule-relative goals only) and

@@ -65,6 +65,8 @@ class Task(abc.ABC):
 
     #: Numbers appended after the 24 base observations (e.g. the Reacher's goal).
     extra_obs_dim: int = 0
+    #: Whether the observation holds the task's target T at obs[24:27] (a Manager's parameter may then be relative to it).
+    observes_target: bool = False
     #: Named observation features (:data:`hrlp.envs.physics.OBS_FEATURES`) that end the extra observations, in order: a
     #: skill trained on the task is given them wherever it acts (a Manager's environment computes them from its physics).
     observed_features: tuple[str, ...] = ()
@@ -663,6 +665,7 @@ class MoverTask(Task):
     """'grip' (states along the Gripper skill's successful episodes), 'placed' (hand placed by IK, claw at rest) or
     'held' (states with the capsule in the claw of the ``gripper-imitated`` skill)."""
     extra_obs_dim = 3
+    observes_target = True
     tracked = ("target_dist",)
     tracked_max = MOVE_EXTREMES
 
@@ -746,6 +749,7 @@ class ReachAndMoveTask(Task):
     success_tol: float = 0.03
     """A step succeeds when d(C, T) is below this, metres."""
     extra_obs_dim = 3
+    observes_target = True
     tracked = ("target_dist",)
     tracked_max = MOVE_EXTREMES
 

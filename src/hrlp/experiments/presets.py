@@ -125,6 +125,12 @@ def _relative_only(config: TrainConfig, reacher: str) -> TrainConfig:
     return replace(config, macro=replace(config.macro, handover=Handover(approach_height=0.0, open_torque=0.0)))
 
 
+def _target_relative(config: TrainConfig) -> TrainConfig:
+    """A hand-over Manager's config whose Mover targets are offsets from the task's target T (``Handover.target_relative``)."""
+    assert config.macro is not None and config.macro.handover is not None
+    return replace(config, macro=replace(config.macro, handover=replace(config.macro.handover, target_relative=True)))
+
+
 def _kl(config: TrainConfig, max_kl: float) -> TrainConfig:
     """``config`` with the trust region's radius ``max_kl`` (its other TRPO settings kept)."""
     return replace(config, trpo=replace(config.trpo, max_kl=max_kl))
@@ -323,8 +329,11 @@ PRESETS: dict[str, Preset] = {
             (
                 Run(
                     "reacher-handover+gripper-imitated+mover-held",
-                    _relative_only(
-                        _tuned(_manager("ReachAndMove", ("reacher", "gripper-imitated", "mover-held"), 15)), "reacher-handover"
+                    _target_relative(
+                        _relative_only(
+                            _tuned(_manager("ReachAndMove", ("reacher", "gripper-imitated", "mover-held"), 15)),
+                            "reacher-handover",
+                        )
                     ),
                     _FIG5["mover-noised"][1],
                 ),

@@ -34,7 +34,7 @@ from hrlp.envs.arm_env import ArmEnv
 from hrlp.envs.batched import BatchedArmEnv
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
 from hrlp.envs.vector import VectorStep, check_num_envs, info_arrays, physics_seconds
-from hrlp.skills.skill import HANDOVER_POINT, POINT_TASKS, Skill
+from hrlp.skills.skill import HANDOVER_POINT, HANDOVER_TARGET, MOVE_TASKS, POINT_TASKS, ParamSpec, Skill
 
 _HAND_XY = slice(18, 20)  # the hand H's x, y in the base observation
 
@@ -81,8 +81,15 @@ class Handover:
     """While a point skill runs, its two finger torques are replaced by this torque opening the claw (rc_close < 0,
     lc_close > 0; ARM_CLAW facts): a weak push that keeps the claw open without sweeping the capsule; 0 leaves the
     skill's own finger torques."""
+    target_relative: bool = False
+    """A moving skill's (a Mover's) target is an offset from the task's own target T in
+    :data:`~hrlp.skills.skill.HANDOVER_TARGET`'s box (10 cm each way), instead of a point of the whole workspace: the
+    Manager's first targets fall near T. Only on tasks that observe a target (reach-and-move)."""
 
     def __post_init__(self) -> None:
+        for name in ("relative", "target_relative"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"Handover.{name} must be true or false, got {getattr(self, name)!r}")
         for name in ("open_torque", "approach_height", "approach_radius"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not (0 <= v <= 1):
@@ -140,8 +147,12 @@ class MacroEnv(gym.Env):
         self.drives = [handover if pt else None for pt in self.points]
         #: What the Manager's block of each skill means: the skill's own specification, or with ``handover.relative``
         #: the capsule-relative box for point skills.
-        self.param_specs = [HANDOVER_POINT if handover and handover.relative and pt else s.param
-                            for s, pt in zip(self.skills, self.points, strict=True)]  # fmt: skip
+        self.param_specs = [self._spec(s, pt) for s, pt in zip(self.skills, self.points, strict=True)]
+        if any(p.frame == "target" for p in self.param_specs) and not getattr(
+            getattr(env.unwrapped, "task", None), "observes_target", False
+        ):
+            raise ValueError(f"Handover.target_relative needs a task that observes a target (reach-and-move, the Movers); "
+                             f"{type(env.unwrapped.task).__name__} does not")  # fmt: skip
         low = [np.asarray(p.low, dtype=np.float64) for p in self.param_specs]
         high = [np.asarray(p.high, dtype=np.float64) for p in self.param_specs]
         if micro:
@@ -158,6 +169,16 @@ class MacroEnv(gym.Env):
         self.render_mode = env.render_mode
         self.on_substep: Callable[[str], None] | None = None
         self._obs = np.zeros(env.observation_space.shape)
+
+    def _spec(self, skill: Skill, point: bool) -> ParamSpec:
+        """What the Manager's block of ``skill`` means: its own specification, or with hand-over the capsule-relative
+        box for point skills (``relative``) and the target-relative box for moving skills (``target_relative``)."""
+        h = self.handover
+        if h and h.relative and point:
+            return HANDOVER_POINT
+        if h and h.target_relative and skill.task in MOVE_TASKS:
+            return HANDOVER_TARGET
+        return skill.param
 
     def parameters(self, choice: int, block: np.ndarray, obs: np.ndarray | None = None) -> np.ndarray:
         """The chosen macro-action's parameters in its own units (metres in the world frame, torques) from its block in

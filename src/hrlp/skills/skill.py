@@ -20,9 +20,11 @@ from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS, OBS_FEATURES, ArmPhysics
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
 
-#: Named frames a parameter vector can be expressed in: the slice of the 24-number base observation that holds the
-#: frame's origin (None for the world frame). A parameter in a body's frame is an offset from that body's position.
-FRAMES: dict[str, slice | None] = {"world": None, "hand": slice(18, 21), "capsule": slice(21, 24)}
+#: Named frames a parameter vector can be expressed in: the slice of the observation that holds the frame's origin
+#: (None for the world frame). A parameter in a body's frame is an offset from that body's position. 'hand' and
+#: 'capsule' lie in the 24 base numbers; 'target' (the task's target T) in obs[24:27] of the tasks that observe one
+#: (:attr:`hrlp.envs.tasks.Task.observes_target`: the moving tasks).
+FRAMES: dict[str, slice | None] = {"world": None, "hand": slice(18, 21), "capsule": slice(21, 24), "target": slice(24, 27)}
 
 
 @dataclass(frozen=True)
@@ -40,8 +42,8 @@ class ParamSpec:
     obs_start: int = BASE_OBS_DIM
     """Index of the skill's observation where the parameters start (they follow the 24 base numbers)."""
     frame: str = "world"
-    """The frame of the bounds (a key of :data:`FRAMES`): 'world', or a body ('capsule', 'hand') whose position at
-    the start of the macro-action is added to the parameters before they reach the skill."""
+    """The frame of the bounds (a key of :data:`FRAMES`): 'world', or a body ('capsule', 'hand', 'target') whose
+    position at the start of the macro-action is added to the parameters before they reach the skill."""
 
     def __post_init__(self) -> None:
         if self.dim < 0 or len(self.low) != self.dim or len(self.high) != self.dim:
@@ -54,7 +56,8 @@ class ParamSpec:
             raise ValueError(f"ParamSpec: a parameter in the {self.frame} frame is a 3-d point, got dim {self.dim}")
 
     def origin(self, base_obs: np.ndarray) -> np.ndarray:
-        """The frame's origin in world coordinates for each state: ``[N, >=24] -> [N, dim]`` (zeros for 'world')."""
+        """The frame's origin in world coordinates for each state: ``[N, >=24] -> [N, dim]`` (zeros for 'world'; the
+        'target' frame reads obs[24:27])."""
         base = np.asarray(base_obs, dtype=np.float64)
         where = FRAMES[self.frame]
         return np.zeros((base.shape[0], self.dim)) if where is None else base[:, where].copy()
@@ -87,6 +90,12 @@ PARAM_SPECS: dict[str, ParamSpec] = {
 }
 #: Tasks whose skills bring the hand to a point (their parameter is the point H must reach).
 POINT_TASKS = frozenset({"Reacher", "ReacherStabilised", "Reacher3D", "ReacherHandover"})
+#: Tasks whose skills move the capsule to a point (their parameter is the capsule's target).
+MOVE_TASKS = frozenset({"MoverPlain", "MoverNoised"})
+#: The hand-over parameterisation of a moving skill on a task with a target: the Manager's target is an offset of at
+#: most 10 cm each way from the task's own target T (docs/skills.md, "Skills that hand over").
+HANDOVER_TARGET = ParamSpec(3, (-0.1, -0.1, -0.1), (0.1, 0.1, 0.1), "offset of the capsule's target from the task's "
+                            "target T (x, y, z), metres", frame="target")  # fmt: skip
 #: The hand-over parameterisation of a point skill: the Manager's goal is an offset from the capsule, at most 5 cm
 #: aside and 0-20 cm above its centre: where a grip starts (docs/skills.md, "Skills that hand over").
 HANDOVER_POINT = ParamSpec(3, (-0.05, -0.05, 0.0), (0.05, 0.05, 0.20), "offset of the hand's goal from the capsule's "
