@@ -87,8 +87,12 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
         assert r.paper == fig7[plain.replace("reacher-handover", "reacher")], r.name
     # reach-and-move with the imitated skills: reach (capsule-relative goals, the Reacher's own claw), grip, carry (the
     # Mover's target a world point), with the headline's Manager settings; TargetDistSum beside the paper's best pair.
-    (carry,) = PRESETS["reach-and-move-imitated"].runs
+    carry, carry_10 = PRESETS["reach-and-move-imitated"].runs
     assert carry.config.task == "ReachAndMove" and PRESETS["reach-and-move-imitated"].metric == "target_dist_sum"
+    assert (
+        carry.config.task_kwargs == {"target_coeff": 1}
+        and replace(carry_10.config, task_kwargs={"target_coeff": 1}) == carry.config
+    )
     assert carry.config.macro.skills == ("reacher-handover", "gripper-imitated", "mover-held") and carry.config.macro.k == 15
     assert carry.config.macro.handover == Handover(approach_height=0.0, open_torque=0.0, target_relative=True)
     assert (carry.config.batch_steps, carry.config.trpo.max_kl, carry.config.init_log_std) == (2_000, 0.02, -1.0)

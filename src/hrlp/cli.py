@@ -657,6 +657,13 @@ def train_manager(
             callback=check.real(0.0, 1.0),
         ),
     ] = 0.2,
+    handover_target_relative: Annotated[
+        bool,
+        typer.Option(
+            help="Pass a Mover's target as an offset of at most 10 cm from the task's own target (reach-and-move; "
+            "docs/skills.md) instead of a point of the workspace; needs --handover.",
+        ),
+    ] = False,
     run_dir: _RUN_DIR = None,
     task_arg: _TASK_ARG = None,
     resume: _RESUME = False,
@@ -675,7 +682,8 @@ def train_manager(
             one = len(ignored) == 1
             raise ValueError(f"{', '.join(ignored)} set{'s' if one else ''} the micro-action, which this Manager does not "
                              f"have: add --micro, or leave {'it' if one else 'them'} out")  # fmt: skip
-        if ignored := [f"--{n.replace('_', '-')}" for n in ("handover_approach_height", "handover_open_torque")
+        if ignored := [f"--{n.replace('_', '-')}" for n in ("handover_approach_height", "handover_open_torque",
+                                                              "handover_target_relative")
                        if not handover and _given(ctx, n)]:  # fmt: skip
             one = len(ignored) == 1
             them = "it" if one else "them"
@@ -693,7 +701,8 @@ def train_manager(
     try:
         names = tuple(s.strip() for s in skills.split(",") if s.strip())
         m = MicroAction(micro_duration, micro_penalty, micro_max_torque) if micro else None
-        drive = Handover(approach_height=handover_approach_height, open_torque=handover_open_torque) if handover else None
+        drive = Handover(approach_height=handover_approach_height, open_torque=handover_open_torque,
+                         target_relative=handover_target_relative) if handover else None  # fmt: skip
         spec = MacroSpec(names, k, m, None if library is None else str(library), drive)
     except ValueError:
         if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
@@ -967,7 +976,8 @@ def _handover_flag() -> tuple[Any, Any]:
     def put(c: Any, v: bool, p: dict[str, Any]) -> Any:
         from hrlp.skills.macro_env import Handover
 
-        fresh = Handover(approach_height=p["handover_approach_height"], open_torque=p["handover_open_torque"])
+        fresh = Handover(approach_height=p["handover_approach_height"], open_torque=p["handover_open_torque"],
+                         target_relative=p["handover_target_relative"])  # fmt: skip
         handover = (c.macro.handover or fresh) if v else None
         return dataclasses.replace(c, macro=dataclasses.replace(c.macro, handover=handover))
 
@@ -1041,6 +1051,7 @@ _RESUME_ACCESSORS: dict[str, tuple[Any, Any]] = {
     "handover": _handover_flag(),
     "handover_approach_height": _handover_field("approach_height"),
     "handover_open_torque": _handover_field("open_torque"),
+    "handover_target_relative": _handover_field("target_relative"),
     "micro_duration": _micro_field("duration"),
     "micro_penalty": _micro_field("penalty"),
     "micro_max_torque": _micro_field("max_torque"),

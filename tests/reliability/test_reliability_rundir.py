@@ -110,6 +110,19 @@ def test_the_lock_is_reentrant_in_one_thread_and_a_reproduce_job_on_a_held_direc
     assert sorted(p.name for p in job.run_dir.iterdir()) == [LOCK_FILE]  # nothing trained, nothing written
 
 
+def test_a_lock_on_a_new_directory_that_nothing_was_written_to_leaves_no_directory(tmp_path):
+    with pytest.raises(ValueError, match="refused"), directory_lock(tmp_path / "new"):
+        raise ValueError("refused before anything was written")
+    assert not (tmp_path / "new").exists()
+    (tmp_path / "mine").mkdir()  # a directory that was there before stays, with its lock file
+    with directory_lock(tmp_path / "mine"):
+        pass
+    assert (tmp_path / "mine" / LOCK_FILE).is_file()
+    with directory_lock(tmp_path / "used"):
+        (tmp_path / "used" / "log.txt").write_text("x")
+    assert sorted(q.name for q in (tmp_path / "used").iterdir()) == [LOCK_FILE, "log.txt"]
+
+
 # --- 5: one way to resolve a checkpoint ---------------------------------------------------------------------------
 
 

@@ -9,7 +9,7 @@ from hrlp.checkpoint import CheckpointError
 from hrlp.envs import make
 from hrlp.skills import PARAM_SPECS, ParamSpec, SkillLibrary, load_skill
 from hrlp.skills.macro_env import Handover, MacroEnv, MacroSpec, MicroAction, step_macros
-from hrlp.skills.skill import HANDOVER_POINT
+from hrlp.skills.skill import HANDOVER_POINT, HANDOVER_TARGET
 
 H, C = slice(18, 21), slice(21, 24)
 
@@ -92,6 +92,30 @@ def _scripted_success(skills, handover, episodes=48, reach_calls=8):
     return success.mean()
 
 
+def test_mover_targets_relative_to_the_tasks_target_reach_the_mover_as_that_point():
+    skills = [load_skill("reacher-handover"), load_skill("gripper-imitated"), load_skill("mover-held")]
+    handover = Handover(approach_height=0.0, open_torque=0.0, target_relative=True)
+    macro = MacroEnv(make("ReachAndMove", episode_steps=45), skills, k=15, handover=handover)
+    obs, _ = macro.reset(seed=2)
+    assert macro.param_specs[2] == HANDOVER_TARGET and macro.param_specs[0] == HANDOVER_POINT
+    assert macro.param_specs[1] == skills[1].param  # the Gripper has no parameters
+    offset = np.array([0.05, -0.02, 0.1])  # the box's corner in z: block +1
+    block = offset / 0.1
+    assert macro.parameters(2, block) == pytest.approx(obs[24:27] + offset)
+    assert macro.block(2, obs[24:27] + offset) == pytest.approx(block)
+    # The Mover is given T + offset: the same torques as the skill fed that point directly.
+    low = make("ReachAndMove", episode_steps=45)
+    low_obs, _ = low.reset(seed=2)
+    macro.step((2, np.zeros(3), np.zeros(0), block))
+    for _ in range(15):
+        low_obs, *_ = low.step(skills[2].act(low_obs[None, :24], (obs[24:27] + offset)[None])[0])
+    np.testing.assert_allclose(macro.env.physics.qpos, low.physics.qpos)
+    # A task without a target has nothing to be relative to: refused when the Manager's environment is made.
+    with pytest.raises(ValueError, match="needs a task that observes a target"):
+        MacroEnv(make("ReachAndGrip2"), skills, k=15, handover=handover)
+    assert MacroEnv(make("ReachAndGrip2"), skills, k=15, handover=Handover()).param_specs[2] == skills[2].param
+
+
 def test_the_shipped_reacher_hands_over_to_the_gripper_only_through_the_handover_interface(shipped):
     paper, handover = _scripted_success(shipped, None), _scripted_success(shipped, Handover())
     assert paper < 0.25 and handover > 0.6, (paper, handover)
@@ -129,6 +153,8 @@ def test_bad_frames_and_handover_settings_are_refused():
     for bad in ({"open_torque": 2.0}, {"approach_height": -0.1}, {"approach_radius": True}):
         with pytest.raises(ValueError, match="Handover"):
             Handover(**bad)
+    with pytest.raises(ValueError, match=r"Handover\.target_relative must be true or false"):
+        Handover(target_relative="yes")
     with pytest.raises(ValueError, match="approach_radius must be positive"):
         Handover(approach_radius=0.0)
 
@@ -136,6 +162,11 @@ def test_bad_frames_and_handover_settings_are_refused():
 def test_macro_spec_round_trips_the_handover_and_reads_configs_without_it():
     spec = MacroSpec(("gripper", "reacher"), k=10, handover=Handover(open_torque=0.1))
     assert MacroSpec.from_json(json.loads(json.dumps(spec.to_json()))) == spec
+    carry = MacroSpec(("reacher-handover", "mover-held"), k=15, handover=Handover(target_relative=True))
+    assert MacroSpec.from_json(json.loads(json.dumps(carry.to_json()))) == carry
+    older = spec.to_json()
+    del older["handover"]["target_relative"]  # a hand-over config from before target_relative
+    assert MacroSpec.from_json(older).handover == Handover(open_torque=0.1)
     old = {"skills": ["gripper", "reacher"], "k": 10, "micro": None, "library": None}  # a config from before handover
     assert MacroSpec.from_json(old).handover is None
 
@@ -180,3 +211,25 @@ def test_train_manager_sets_the_handover_drive_and_resume_compares_it(tmp_path):
                                  "1.5", "--run-dir", str(tmp_path / "y")])  # fmt: skip
     assert r.exit_code == 2 and "--handover-open-torque" in r.output, r.output
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_train_manager_passes_mover_targets_relative_to_the_tasks_target(tmp_path):
+    from typer.testing import CliRunner
+
+    from hrlp.cli import app
+
+    run = tmp_path / "m"
+    args = ["train-manager", "ReachAndMove", "--skills", "reacher-handover,gripper-imitated,mover-held", "--k", "3",
+            "--handover-approach-height", "0", "--handover-open-torque", "0", "--handover-target-relative", "--steps", "24",
+            "--batch-steps", "12", "--num-envs", "2", "--episode-steps", "12", "--run-dir", str(run)]  # fmt: skip
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    saved = MacroSpec.from_json(json.loads((run / "config.json").read_text())["macro"])
+    assert saved.handover == Handover(approach_height=0.0, open_torque=0.0, target_relative=True)
+    r = CliRunner().invoke(app, ["train-manager", "ReachAndMove", "--no-handover-target-relative", "--steps", "48",
+                                 "--run-dir", str(run), "--resume"])  # fmt: skip
+    assert r.exit_code == 2 and "--handover-target-relative False (the run: True)" in r.output, r.output
+    # On a task without a target the Manager's environment refuses it, in one line, before training starts.
+    r = CliRunner().invoke(app, ["train-manager", "ReachAndGrip1", "--skills", "gripper,mover-held",
+                                 "--handover-target-relative", "--steps", "24", "--run-dir", str(tmp_path / "x")])  # fmt: skip
+    assert r.exit_code != 0 and "needs a task that observes a target" in r.output, r.output

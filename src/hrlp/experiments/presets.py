@@ -323,20 +323,31 @@ PRESETS: dict[str, Preset] = {
         Preset(
             "reach-and-move-imitated",
             "reach-and-move, Manager over the hand-over Reacher, the imitated Gripper and the Mover from held starts "
-            "(reacher-handover + gripper-imitated + mover-held: reach, grip, carry), k = 15, the headline's Manager "
-            "settings; paper: its best pair (s-reacher + mover-noised)",
+            "(reacher-handover + gripper-imitated + mover-held: reach, grip, carry; the Mover's target relative to the "
+            "task's), k = 15, the headline's Manager settings, TargetCoeff 1 and 10; paper: its best pair (s-reacher + "
+            "mover-noised)",
             "Section 4.2.2, Figure 5",
-            (
+            tuple(
                 Run(
-                    "reacher-handover+gripper-imitated+mover-held",
+                    f"reacher-handover+gripper-imitated+mover-held,target_coeff={coeff}",
                     _target_relative(
                         _relative_only(
-                            _tuned(_manager("ReachAndMove", ("reacher", "gripper-imitated", "mover-held"), 15)),
+                            _tuned(
+                                _manager(
+                                    "ReachAndMove",
+                                    ("reacher", "gripper-imitated", "mover-held"),
+                                    15,
+                                    task_kwargs={"target_coeff": coeff},
+                                )
+                            ),
                             "reacher-handover",
                         )
                     ),
                     _FIG5["mover-noised"][1],
-                ),
+                )
+                # TargetCoeff 1 (the task's default) and 10 (the largest of Figure 4's): the weight of d(C, T) in the
+                # reward, against d(H, C)'s 1; TargetDistSum, the metric, does not depend on it.
+                for coeff in (1, 10)
             ),
             metric="target_dist_sum",
             budget=3_000_000,
