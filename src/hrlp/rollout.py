@@ -452,7 +452,7 @@ def _receive(conn: Any) -> Any:
     return payload
 
 
-def _die_with_parent(parent_pid: int) -> None:
+def die_with_parent(parent_pid: int) -> None:
     """Have the kernel kill this process when its parent dies (Linux ``PR_SET_PDEATHSIG``), so that a trainer killed
     with SIGKILL leaves no sampling workers behind; elsewhere a worker ends at its next message (EOF on the pipe)."""
     if sys.platform.startswith("linux"):
@@ -471,9 +471,9 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
                     first_index: int = 0, parent_pid: int | None = None, gamma: float | None = None) -> None:  # fmt: skip
     """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests.
 
-    It dies with its parent (:func:`_die_with_parent`) and ends quietly when the parent's end of the pipe closes."""
+    It dies with its parent (:func:`die_with_parent`) and ends quietly when the parent's end of the pipe closes."""
     if parent_pid is not None:
-        _die_with_parent(parent_pid)
+        die_with_parent(parent_pid)
     torch.set_num_threads(1)
     try:
         normalizer = RunningNormalizer.from_config({**norm_config, "frozen": True})

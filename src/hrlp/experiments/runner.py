@@ -215,6 +215,17 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
         json.dump(data, f, indent=2)
 
 
+def process_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of ``workers`` spawned processes that die with this one (``PR_SET_PDEATHSIG`` on Linux): a ``hrlp
+    reproduce`` stopped by SIGTERM or SIGKILL leaves no run training on behind it."""
+    import multiprocessing as mp
+
+    from hrlp.rollout import die_with_parent
+
+    return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
+                               initargs=(os.getpid(),))  # fmt: skip
+
+
 def reproduce(
     preset_name: str | Preset,
     out: Path = Path("runs/reproduce"),
@@ -275,9 +286,7 @@ def reproduce(
             if on_result:
                 on_result(res)
         return results
-    import multiprocessing as mp
-
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+    with process_pool(workers) as pool:
         futures = [pool.submit(run_job, j, reuse) for j in jobs]
         try:
             for f in as_completed(futures):
