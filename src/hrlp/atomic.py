@@ -74,13 +74,13 @@ _held_guard = threading.Lock()
 def directory_lock(directory: Path | str, what: str = "run directory") -> Iterator[None]:
     """Hold an exclusive OS lock (``fcntl.flock`` on ``DIRECTORY/.hrlp-lock``) on ``directory`` for the block.
 
-        Creates ``directory`` if needed. Raises :class:`DirectoryLockedError` at once (never waits) when another process
-        -- or another thread of this one -- holds it, naming the directory and the holder's pid. Re-entrant within one
-        thread, so a run that holds its directory's lock can save checkpoints (which take it too). The lock is released
-        when the block ends or the process dies (the kernel drops it with the file descriptor, so a killed run never
-        leaves a stale lock); the lock file itself stays, harmless, but a directory this call created and the block left
-    empty (but for the lock file) is removed again. Raises :class:`StorageError` if the directory cannot
-        be created or the lock file not written (e.g. a read-only directory).
+    Creates ``directory`` if needed. Raises :class:`DirectoryLockedError` at once (never waits) when another process
+    -- or another thread of this one -- holds it, naming the directory and the holder's pid. Re-entrant within one
+    thread, so a run that holds its directory's lock can save checkpoints (which take it too). The lock is released
+    when the block ends or the process dies (the kernel drops it with the file descriptor, so a killed run never
+    leaves a stale lock); the lock file itself stays, harmless, but a directory this call created and the block left
+    empty (but for the lock file) is removed again. Raises :class:`StorageError` if the directory cannot be created or
+    the lock file not written (e.g. a read-only directory).
     """
     directory = Path(directory)
     if fcntl is None:  # pragma: no cover

@@ -145,14 +145,12 @@ class MacroEnv(gym.Env):
         self.points = [s.task in POINT_TASKS for s in self.skills]
         #: How each skill is driven: the hand-over settings for point skills, None for skills run as trained.
         self.drives = [handover if pt else None for pt in self.points]
-        #: What the Manager's block of each skill means: the skill's own specification, or with ``handover.relative``
-        #: the capsule-relative box for point skills.
+        #: What the Manager's block of each skill means (:meth:`_spec`).
         self.param_specs = [self._spec(s, pt) for s, pt in zip(self.skills, self.points, strict=True)]
-        if any(p.frame == "target" for p in self.param_specs) and not getattr(
-            getattr(env.unwrapped, "task", None), "observes_target", False
-        ):
+        task = getattr(env.unwrapped, "task", None)
+        if any(p.frame == "target" for p in self.param_specs) and not getattr(task, "observes_target", False):
             raise ValueError(f"Handover.target_relative needs a task that observes a target (reach-and-move, the Movers); "
-                             f"{type(env.unwrapped.task).__name__} does not")  # fmt: skip
+                             f"{type(task).__name__} does not")  # fmt: skip
         low = [np.asarray(p.low, dtype=np.float64) for p in self.param_specs]
         high = [np.asarray(p.high, dtype=np.float64) for p in self.param_specs]
         if micro:
