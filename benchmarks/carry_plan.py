@@ -17,6 +17,7 @@ import argparse
 import numpy as np
 
 from hrlp.envs import make
+from hrlp.envs.tasks import SparseSuccess
 from hrlp.evaluate import wilson_interval
 from hrlp.skills import load_skill
 from hrlp.skills.macro_env import Handover, MacroEnv, step_macros
@@ -34,12 +35,11 @@ def carry(reacher: str, gripper: str, mover: str, episodes: int, k: int, reach_c
         e.reset(seed=i)
     untouched = np.array([-np.linalg.norm(e._obs[C] - e._obs[T]) for e in envs]) * envs[0].env.unwrapped.episode_steps
     success, held_ever, done = np.zeros(episodes, bool), np.zeros(episodes, bool), np.zeros(episodes, bool)
-    dist_sum = np.zeros(episodes)
+    dist_sum, gripped = np.zeros(episodes), SparseSuccess()  # Definition 1: the capsule is held
     for t in range(10_000):
         rows = []
         for i, e in enumerate(envs):
-            p = e.env.unwrapped.physics
-            held = p.finger_gap() < 0.03 and p.hand_to_capsule() < 0.05
+            held = gripped(e.env.unwrapped.physics)
             held_ever[i] |= held and not done[i]
             choice = 2 if held else (0 if t < reach_calls else 1)
             blocks = np.clip(np.concatenate([e.block(0, e._obs[C] + (0, 0, 0.04)), e.block(2, e._obs[T])]), -1, 1)
