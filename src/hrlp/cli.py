@@ -664,6 +664,14 @@ def train_manager(
             "docs/skills.md) instead of a point of the workspace; needs --handover.",
         ),
     ] = False,
+    handover_initiation: Annotated[
+        bool,
+        typer.Option(
+            help="Start each skill only from its initiation set (the states like those it was trained from, e.g. a "
+            "Mover from held starts only while the capsule is lifted): a choice outside it runs the first skill whose "
+            "set holds (docs/skills.md); needs --handover.",
+        ),
+    ] = False,
     run_dir: _RUN_DIR = None,
     task_arg: _TASK_ARG = None,
     resume: _RESUME = False,
@@ -683,7 +691,7 @@ def train_manager(
             raise ValueError(f"{', '.join(ignored)} set{'s' if one else ''} the micro-action, which this Manager does not "
                              f"have: add --micro, or leave {'it' if one else 'them'} out")  # fmt: skip
         if ignored := [f"--{n.replace('_', '-')}" for n in ("handover_approach_height", "handover_open_torque",
-                                                              "handover_target_relative")
+                                                              "handover_target_relative", "handover_initiation")
                        if not handover and _given(ctx, n)]:  # fmt: skip
             one = len(ignored) == 1
             them = "it" if one else "them"
@@ -702,7 +710,8 @@ def train_manager(
         names = tuple(s.strip() for s in skills.split(",") if s.strip())
         m = MicroAction(micro_duration, micro_penalty, micro_max_torque) if micro else None
         drive = Handover(approach_height=handover_approach_height, open_torque=handover_open_torque,
-                         target_relative=handover_target_relative) if handover else None  # fmt: skip
+                         target_relative=handover_target_relative,
+                         initiation=handover_initiation) if handover else None  # fmt: skip
         spec = MacroSpec(names, k, m, None if library is None else str(library), drive)
     except ValueError:
         if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
@@ -977,7 +986,7 @@ def _handover_flag() -> tuple[Any, Any]:
         from hrlp.skills.macro_env import Handover
 
         fresh = Handover(approach_height=p["handover_approach_height"], open_torque=p["handover_open_torque"],
-                         target_relative=p["handover_target_relative"])  # fmt: skip
+                         target_relative=p["handover_target_relative"], initiation=p["handover_initiation"])  # fmt: skip
         handover = (c.macro.handover or fresh) if v else None
         return dataclasses.replace(c, macro=dataclasses.replace(c.macro, handover=handover))
 
@@ -1052,6 +1061,7 @@ _RESUME_ACCESSORS: dict[str, tuple[Any, Any]] = {
     "handover_approach_height": _handover_field("approach_height"),
     "handover_open_torque": _handover_field("open_torque"),
     "handover_target_relative": _handover_field("target_relative"),
+    "handover_initiation": _handover_field("initiation"),
     "micro_duration": _micro_field("duration"),
     "micro_penalty": _micro_field("penalty"),
     "micro_max_torque": _micro_field("max_torque"),

@@ -131,6 +131,12 @@ def _target_relative(config: TrainConfig) -> TrainConfig:
     return replace(config, macro=replace(config.macro, handover=replace(config.macro.handover, target_relative=True)))
 
 
+def _initiation(config: TrainConfig) -> TrainConfig:
+    """A hand-over Manager's config whose skills start only from their initiation sets (``Handover.initiation``)."""
+    assert config.macro is not None and config.macro.handover is not None
+    return replace(config, macro=replace(config.macro, handover=replace(config.macro.handover, initiation=True)))
+
+
 def _kl(config: TrainConfig, max_kl: float) -> TrainConfig:
     """``config`` with the trust region's radius ``max_kl`` (its other TRPO settings kept)."""
     return replace(config, trpo=replace(config.trpo, max_kl=max_kl))
@@ -347,6 +353,38 @@ PRESETS: dict[str, Preset] = {
                 )
                 # TargetCoeff 1 (the task's default) and 10 (the largest of Figure 4's): the weight of d(C, T) in the
                 # reward, against d(H, C)'s 1; TargetDistSum, the metric, does not depend on it.
+                for coeff in (1, 10)
+            ),
+            metric="target_dist_sum",
+            budget=3_000_000,
+        ),
+        Preset(
+            "reach-and-move-initiation",
+            "reach-and-move-imitated with initiation sets: each skill starts only from states like those it was "
+            "trained from (the Reacher with the capsule resting, the Gripper with the palm within 9 cm of it, the Mover "
+            "with the capsule lifted; a choice outside its set runs the first skill whose set holds), TargetCoeff 1 "
+            "and 10; paper: its best pair (s-reacher + mover-noised)",
+            "Section 4.2.2, Figure 5",
+            tuple(
+                Run(
+                    f"reacher-handover+gripper-imitated+mover-held,target_coeff={coeff},initiation",
+                    _initiation(
+                        _target_relative(
+                            _relative_only(
+                                _tuned(
+                                    _manager(
+                                        "ReachAndMove",
+                                        ("reacher", "gripper-imitated", "mover-held"),
+                                        15,
+                                        task_kwargs={"target_coeff": coeff},
+                                    )
+                                ),
+                                "reacher-handover",
+                            )
+                        )
+                    ),
+                    _FIG5["mover-noised"][1],
+                )
                 for coeff in (1, 10)
             ),
             metric="target_dist_sum",

@@ -34,7 +34,7 @@ from hrlp.checkpoint import CheckpointError, ReadLimits, TensorInfo, load_module
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
 from hrlp.policies.mlp import GaussianPolicy
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.skills.skill import PARAM_SPECS, ParamSpec, Skill, check_features, features_dim
+from hrlp.skills.skill import PARAM_SPECS, Initiation, ParamSpec, Skill, check_features, features_dim, initiation_for
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 #: Bounds on a skill's files: a manifest is about 2 KB and 5 levels deep, the weights of a 64x64 skill 27 KB.
@@ -175,7 +175,19 @@ def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...],
     if not isinstance(trained, dict) or not isinstance(trained.get("config"), dict):
         raise _SkillProblem(f"manifest's 'trained' must be an object holding the training 'config', got {_short(trained)}")
     _integer(trained, "env_steps", 0, 2**62, "environment steps it was trained for")
+    _initiation(m)
     return param, k, tuple(hidden), features
+
+
+def _initiation(m: dict[str, Any]) -> Initiation:
+    """The skill's initiation set from its training task and settings (:func:`~hrlp.skills.skill.initiation_for`)."""
+    kwargs = m["trained"]["config"].get("task_kwargs")
+    if kwargs is not None and not isinstance(kwargs, dict):
+        raise _SkillProblem(f"manifest's training 'task_kwargs' must be an object, got {_short(kwargs)}")
+    try:
+        return initiation_for(m["task"], kwargs)
+    except ValueError as e:
+        raise _SkillProblem(f"manifest's training task settings: {_short(e, 200)}") from None
 
 
 def _number(x: Any) -> bool:
@@ -333,7 +345,7 @@ class SkillLibrary:
             norm = RunningNormalizer.from_config(m["normalizer"], stats)
         except ValueError as e:  # not expected after the checks; named all the same
             raise CheckpointError(f"skill {name!r} ({self.root / name}): {_short(e, 200)}") from None
-        return Skill(name, m["task"], param, k, policy, norm, sha256, features)
+        return Skill(name, m["task"], param, k, policy, norm, sha256, features, _initiation(m))
 
 
 __all__ = [

@@ -85,9 +85,15 @@ class Handover:
     """A moving skill's (a Mover's) target is an offset from the task's own target T in
     :data:`~hrlp.skills.skill.HANDOVER_TARGET`'s box (10 cm each way), instead of a point of the whole workspace: the
     Manager's first targets fall near T. Only on tasks that observe a target (reach-and-move)."""
+    initiation: bool = False
+    """Each skill starts only from its initiation set (:attr:`Skill.initiation`: the states like those it was trained
+    from, e.g. a Mover trained from held starts while the capsule is lifted): a choice outside its skill's set runs the
+    first skill, in the Manager's order, whose set holds (with its own parameter block), and the choice run is the
+    one reported (``info['macro']``, the decision shares). A choice runs as made where no skill's set holds, and the
+    micro-action always does."""
 
     def __post_init__(self) -> None:
-        for name in ("relative", "target_relative"):
+        for name in ("relative", "target_relative", "initiation"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Handover.{name} must be true or false, got {getattr(self, name)!r}")
         for name in ("open_torque", "approach_height", "approach_radius"):
@@ -219,7 +225,7 @@ class MacroEnv(gym.Env):
                 raise ValueError(f"parameters of {self.names[j]} must have shape ({d},), got {block.shape}")
             row[1 + self.offsets[j] : 1 + self.offsets[j + 1]] = block
         res = step_macros([self], row[None])
-        info = {**res.infos[0], "tau": int(res.tau[0]), "discount": float(res.discount[0]), "macro": self.names[choice],
+        info = {**res.infos[0], "tau": int(res.tau[0]), "discount": float(res.discount[0]), "macro": self.names[int(res.choice[0])],
                 "task_reward": float(res.task_reward[0])}  # fmt: skip
         return res.obs[0].copy(), float(res.rewards[0]), bool(res.terminated[0]), bool(res.truncated[0]), info
 
@@ -255,15 +261,21 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     waits. Raises ValueError for a wrong shape, NaN/inf, or a choice that is not one of the macro-actions.
     """
     infos: list[dict[str, Any]] = [{} for _ in envs]
+    runs: np.ndarray | None = None  # the macro-actions run, for on_substep's labels
 
     def step(running: np.ndarray, torques: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        nonlocal runs
         rows = []
         for i, t in zip(running, torques, strict=True):
             env = envs[i]
             rows.append(env.env.step(t))
             infos[i] = rows[-1][4]
             if env.on_substep is not None:
-                env.on_substep(env.names[int(actions[i][0])])  # a valid choice: decide() checked it
+                if runs is None:  # decide() has checked the actions; the envs' _obs are still the decision's start
+                    runs = np.asarray(actions, dtype=np.float64)[:, 0].astype(np.int64)
+                    if envs[0].handover is not None and envs[0].handover.initiation:
+                        runs = initiated(envs[0].skills, np.stack([e._obs for e in envs]), runs)
+                env.on_substep(env.names[int(runs[i])])
         obs, r, term, trunc, _ = zip(*rows, strict=True)
         return np.stack(obs), np.array(r, dtype=np.float64), np.array(term, dtype=bool), np.array(trunc, dtype=bool)
 
@@ -297,8 +309,10 @@ def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
     if (choice != a[:, 0]).any() or (choice < 0).any() or (choice >= len(first.names)).any():
         raise ValueError(f"Manager choices must be integers in [0, {len(first.names)}), got {a[:, 0].tolist()}")
     params = first._centre + first._half * np.clip(a[:, 1:], -1.0, 1.0)
-    durations = first.durations[choice]
     obs = np.array(obs, dtype=np.float64)
+    if first.handover is not None and first.handover.initiation:
+        choice = initiated(first.skills, obs, choice)
+    durations = first.durations[choice]
     for s, spec in enumerate(first.param_specs):  # parameters relative to a body: add its position at the start
         if spec.frame != "world":
             params[:, first.offsets[s] : first.offsets[s + 1]] += spec.origin(obs)
@@ -346,6 +360,22 @@ def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
     if first.micro is not None and first.micro.penalty:
         rewards[choice == n_skills] -= first.micro.penalty
     return choice, MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, [])
+
+
+def initiated(skills: Sequence[Skill], obs: np.ndarray, choice: np.ndarray) -> np.ndarray:
+    """The macro-action each of ``N`` states runs under initiation sets (:attr:`Handover.initiation`): ``choice [N]``
+    where its skill's set holds in ``obs [N, >=24]`` (and for the micro-action, index ``len(skills)``), else the first
+    skill whose set holds, else ``choice``. -> ``[N]`` int."""
+    if not skills:
+        return choice
+    holds = np.stack([s.initiation.holds(obs) for s in skills], axis=1)  # [N, n_skills]
+    out = choice.copy()
+    skill_chosen = choice < len(skills)
+    outside = skill_chosen & ~holds[np.arange(len(choice)), np.minimum(choice, len(skills) - 1)]
+    fallback = np.argmax(holds, axis=1)
+    replace = outside & holds.any(axis=1)
+    out[replace] = fallback[replace]
+    return out
 
 
 class MacroVectorEnv:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS, OBS_FEATURES, ArmPhysics
+from hrlp.envs.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
 
@@ -102,6 +102,78 @@ HANDOVER_POINT = ParamSpec(3, (-0.05, -0.05, 0.0), (0.05, 0.05, 0.20), "offset o
                            "centre C (x, y, z), metres", frame="capsule")  # fmt: skip
 
 
+#: Height of the capsule's centre above its resting height, metres, above which it counts as lifted (held): a capsule in
+#: the claw of a Gripper that gripped it sits 1.1-3.4 cm up (the recorded held starts), one resting on the table 0 cm.
+CAPSULE_LIFTED = 0.01
+#: Where a Gripper or a Mover that grips for itself starts when its task does not say (GripperTask's and MoverTask's
+#: starts: the palm at most 9 cm from the capsule's centre), metres.
+GRIP_START_REACH = 0.09
+
+
+@dataclass(frozen=True)
+class Initiation:
+    """A skill's initiation set (an option's, Sutton, Precup & Singh 1999): the states it may start from, those like the
+    ones it was trained from, tested on the base observation (H = obs[18:21], C = obs[21:24]).
+
+    ``capsule`` is 'any', 'resting' (C at most :data:`CAPSULE_LIFTED` above its resting height) or 'lifted' (above it);
+    ``hand_within``, if set, bounds d(H, C) in metres. :func:`initiation_for` declares each skill's from its training
+    task; a Manager's environment with ``Handover.initiation`` runs a choice outside its skill's set as another skill.
+    """
+
+    capsule: str = "any"
+    """'any', 'resting' or 'lifted'."""
+    hand_within: float | None = None
+    """Largest d(H, C) the skill starts from, metres (None: anywhere)."""
+
+    def __post_init__(self) -> None:
+        if self.capsule not in ("any", "resting", "lifted"):
+            raise ValueError(f"Initiation.capsule must be 'any', 'resting' or 'lifted', got {self.capsule!r}")
+        h = self.hand_within
+        if h is not None and (isinstance(h, bool) or not isinstance(h, int | float) or not (0 < h < np.inf)):
+            raise ValueError(f"Initiation.hand_within must be a positive number of metres or None, got {h!r}")
+
+    def holds(self, base_obs: np.ndarray) -> np.ndarray:
+        """Whether each state is in the set: ``[N, >=24] -> [N]`` bool."""
+        obs = np.asarray(base_obs, dtype=np.float64).reshape(len(base_obs), -1)
+        ok = np.ones(len(obs), dtype=bool)
+        if self.capsule != "any":
+            lifted = obs[:, 23] - CAPSULE_REST_Z > CAPSULE_LIFTED
+            ok &= lifted if self.capsule == "lifted" else ~lifted
+        if self.hand_within is not None:
+            ok &= np.linalg.norm(obs[:, 18:21] - obs[:, 21:24], axis=1) <= self.hand_within
+        return ok
+
+    def describe(self) -> str:
+        """One phrase, e.g. 'the capsule resting' or 'the hand within 9 cm of the capsule'."""
+        parts = [] if self.capsule == "any" else [f"the capsule {self.capsule}"]
+        if self.hand_within is not None:
+            parts.append(f"the hand within {self.hand_within * 100:g} cm of the capsule")
+        return " and ".join(parts) or "anywhere"
+
+
+def initiation_for(task: str, task_kwargs: dict[str, Any] | None = None) -> Initiation:
+    """The initiation set of a skill trained on ``task`` with ``task_kwargs``, declared here once from the task's start
+    states: a Reacher (:data:`POINT_TASKS`) starts anywhere with the capsule resting; a Gripper, with the palm within its
+    ``start_distance``'s upper end (default 9 cm); a Mover trained from held starts (``starts='held'``), with the
+    capsule lifted; any other Mover, with the palm within 9 cm; a skill of any other task, anywhere. Raises a one-line
+    ValueError for task settings it cannot read."""
+    kw = task_kwargs or {}
+    if task in POINT_TASKS:
+        return Initiation(capsule="resting")
+    if task == "Gripper":
+        reach = kw.get("start_distance", (0.05, GRIP_START_REACH))
+        if not isinstance(reach, list | tuple) or len(reach) != 2 or not all(_is_number(r) for r in reach):
+            raise ValueError(f"a Gripper's start_distance must be two numbers of metres, got {reach!r}")
+        return Initiation(hand_within=float(reach[1]))
+    if task in MOVE_TASKS:
+        return Initiation(capsule="lifted") if kw.get("starts") == "held" else Initiation(hand_within=GRIP_START_REACH)
+    return Initiation()
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and bool(np.isfinite(v))
+
+
 class Skill:
     """A frozen skill: ``act(base_obs [N, 24], params [N, dim], features [N, F]) -> torques [N, 9]`` (the policy's mean
     action).
@@ -114,13 +186,16 @@ class Skill:
         content_hash: sha256 of its weights file (changes if and only if the weights change).
         features: the named observation features it reads after its parameters (:data:`OBS_FEATURES`; none for the
             paper's skills), ``feature_dim`` numbers in all.
+        initiation: the states it may start from (:func:`initiation_for` its training task; default anywhere).
     """
 
     def __init__(self, name: str, task: str, param: ParamSpec, k: int, policy: GaussianPolicy,
-                 normalizer: RunningNormalizer, content_hash: str, features: tuple[str, ...] = ()) -> None:  # fmt: skip
+                 normalizer: RunningNormalizer, content_hash: str, features: tuple[str, ...] = (),
+                 initiation: Initiation | None = None) -> None:  # fmt: skip
         if k < 1:
             raise ValueError(f"skill {name}: default duration k must be >= 1, got {k}")
         self.features = check_features(features, f"skill {name}")
+        self.initiation = initiation or Initiation()
         self.name, self.task, self.param, self.k, self.content_hash = name, task, param, int(k), content_hash
         for p in policy.parameters():
             p.requires_grad_(False)  # frozen: a skill never enters a trust region
