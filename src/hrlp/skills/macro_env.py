@@ -225,8 +225,8 @@ class MacroEnv(gym.Env):
                 raise ValueError(f"parameters of {self.names[j]} must have shape ({d},), got {block.shape}")
             row[1 + self.offsets[j] : 1 + self.offsets[j + 1]] = block
         res = step_macros([self], row[None])
-        info = {**res.infos[0], "tau": int(res.tau[0]), "discount": float(res.discount[0]), "macro": self.names[int(res.choice[0])],
-                "task_reward": float(res.task_reward[0])}  # fmt: skip
+        info = {**res.infos[0], "tau": int(res.tau[0]), "discount": float(res.discount[0]),
+                "macro": self.names[int(res.choice[0])], "task_reward": float(res.task_reward[0])}  # fmt: skip
         return res.obs[0].copy(), float(res.rewards[0]), bool(res.terminated[0]), bool(res.truncated[0]), info
 
     @property
