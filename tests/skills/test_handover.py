@@ -233,3 +233,58 @@ def test_train_manager_passes_mover_targets_relative_to_the_tasks_target(tmp_pat
     r = CliRunner().invoke(app, ["train-manager", "ReachAndGrip1", "--skills", "gripper,mover-held",
                                  "--handover-target-relative", "--steps", "24", "--run-dir", str(tmp_path / "x")])  # fmt: skip
     assert r.exit_code != 0 and "needs a task that observes a target" in r.output, r.output
+
+
+def _base(hand, capsule):
+    obs = np.zeros((len(hand), 24))
+    obs[:, H], obs[:, C] = hand, capsule
+    return obs
+
+
+def test_initiation_sets_hold_where_their_skills_were_trained_to_start():
+    from hrlp.envs.physics import CAPSULE_REST_Z
+    from hrlp.skills.skill import Initiation
+
+    rest, up = CAPSULE_REST_Z, CAPSULE_REST_Z + 0.02
+    capsule = np.array([[0.0, 0.0, rest], [0.0, 0.0, rest], [0.0, 0.0, up], [0.0, 0.0, rest + 0.005]])
+    hand = capsule + np.array([[0.0, 0.0, 0.3], [0.0, 0.06, 0.0], [0.0, 0.0, 0.0], [0.08, 0.0, 0.0]])
+    obs = _base(hand, capsule)
+    np.testing.assert_array_equal(Initiation().holds(obs), [True, True, True, True])
+    np.testing.assert_array_equal(Initiation(capsule="resting").holds(obs), [True, True, False, True])  # 5 mm: resting
+    np.testing.assert_array_equal(Initiation(capsule="lifted").holds(obs), [False, False, True, False])
+    np.testing.assert_array_equal(Initiation(hand_within=0.07).holds(obs), [False, True, True, False])
+    assert Initiation(hand_within=0.09).describe() == "the hand within 9 cm of the capsule"
+    assert Initiation(capsule="lifted").describe() == "the capsule lifted" and Initiation().describe() == "anywhere"
+    for bad in ({"capsule": "held"}, {"hand_within": 0.0}, {"hand_within": True}, {"hand_within": float("nan")}):
+        with pytest.raises(ValueError, match="Initiation"):
+            Initiation(**bad)
+
+
+def test_initiation_sets_are_declared_from_the_training_task_and_read_from_shipped_manifests():
+    from hrlp.skills.skill import Initiation, initiation_for
+
+    assert initiation_for("ReacherHandover") == Initiation(capsule="resting")
+    assert initiation_for("Gripper") == Initiation(hand_within=0.09)
+    assert initiation_for("Gripper", {"start_distance": [0.0, 0.05]}) == Initiation(hand_within=0.05)
+    assert initiation_for("MoverNoised", {"starts": "held"}) == Initiation(capsule="lifted")
+    assert initiation_for("MoverPlain") == Initiation(hand_within=0.09)
+    assert initiation_for("ReachAndGrip2") == Initiation()
+    with pytest.raises(ValueError, match="start_distance must be two numbers"):
+        initiation_for("Gripper", {"start_distance": "far"})
+    shipped = {n: load_skill(n).initiation for n in ("reacher-handover", "gripper-imitated", "mover-held", "mover-noised")}
+    assert shipped == {"reacher-handover": Initiation(capsule="resting"), "gripper-imitated": Initiation(hand_within=0.09),
+                       "mover-held": Initiation(capsule="lifted"), "mover-noised": Initiation(hand_within=0.09)}  # fmt: skip
+
+
+def test_a_damaged_manifests_task_settings_are_named_when_the_skill_is_read(tmp_path):
+    import shutil
+
+    from hrlp.skills.library import shipped_library_root
+
+    shutil.copytree(shipped_library_root() / "gripper-imitated", tmp_path / "g")
+    meta_path = tmp_path / "g" / "meta.json"
+    raw = json.loads(meta_path.read_text())
+    raw["meta"]["trained"]["config"]["task_kwargs"] = {"start_distance": "near"}
+    meta_path.write_text(json.dumps(raw))
+    with pytest.raises(CheckpointError, match="start_distance must be two numbers"):
+        SkillLibrary(tmp_path).load("g")

@@ -89,8 +89,9 @@ class Handover:
     """Each skill starts only from its initiation set (:attr:`Skill.initiation`: the states like those it was trained
     from, e.g. a Mover trained from held starts while the capsule is lifted): a choice outside its skill's set runs the
     first skill, in the Manager's order, whose set holds (with its own parameter block), and the choice run is the
-    one reported (``info['macro']``, the decision shares). A choice runs as made where no skill's set holds, and the
-    micro-action always does."""
+    one reported (``info['macro']``, the decision shares). A skill chosen again right after it ran goes on wherever it
+    has taken the arm (a Gripper's swing may leave its starts' 9 cm); a choice runs as made where no skill's set
+    holds, and the micro-action always does."""
 
     def __post_init__(self) -> None:
         for name in ("relative", "target_relative", "initiation"):
@@ -173,6 +174,7 @@ class MacroEnv(gym.Env):
         self.render_mode = env.render_mode
         self.on_substep: Callable[[str], None] | None = None
         self._obs = np.zeros(env.observation_space.shape)
+        self._ran = -1  # the macro-action the last decision of this episode ran (-1: none yet)
 
     def _spec(self, skill: Skill, point: bool) -> ParamSpec:
         """What the Manager's block of ``skill`` means: its own specification, or with hand-over the capsule-relative
@@ -207,6 +209,7 @@ class MacroEnv(gym.Env):
         """Reset the low-level task."""
         super().reset(seed=seed)
         self._obs, info = self.env.reset(seed=seed, options=options)
+        self._ran = -1
         return self._obs.copy(), info
 
     def step(self, action: tuple) -> tuple[np.ndarray, float, bool, bool, dict]:
@@ -236,12 +239,13 @@ class MacroEnv(gym.Env):
 
     def get_state(self) -> dict[str, Any]:
         """The low-level task's exact state (JSON-serialisable); see :meth:`ArmEnv.get_state`."""
-        return {"env": self.env.get_state(), "obs": self._obs.tolist()}
+        return {"env": self.env.get_state(), "obs": self._obs.tolist(), "ran": self._ran}
 
     def set_state(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`get_state`."""
+        """Restore :meth:`get_state` (a state saved before ``ran`` was recorded: none yet)."""
         self.env.set_state(state["env"])
         self._obs = np.asarray(state["obs"], dtype=np.float64)
+        self._ran = int(state.get("ran", -1))
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """The low-level task's frame."""
@@ -274,7 +278,7 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
                 if runs is None:  # decide() has checked the actions; the envs' _obs are still the decision's start
                     runs = np.asarray(actions, dtype=np.float64)[:, 0].astype(np.int64)
                     if envs[0].handover is not None and envs[0].handover.initiation:
-                        runs = initiated(envs[0].skills, np.stack([e._obs for e in envs]), runs)
+                        runs = initiated(envs[0].skills, np.stack([e._obs for e in envs]), runs, ran)
                 env.on_substep(env.names[int(runs[i])])
         obs, r, term, trunc, _ = zip(*rows, strict=True)
         return np.stack(obs), np.array(r, dtype=np.float64), np.array(term, dtype=bool), np.array(trunc, dtype=bool)
@@ -282,22 +286,25 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     def features(name: str, idx: np.ndarray) -> np.ndarray:
         return np.stack([envs[i].env.unwrapped.physics.feature(name) for i in idx])  # type: ignore[attr-defined]
 
-    _, res = decide(envs[0], np.stack([e._obs for e in envs]), actions, step, features)
-    for e, o in zip(envs, res.obs, strict=True):
-        e._obs = o.copy()
+    ran = np.array([e._ran for e in envs], dtype=np.int64)
+    _, res = decide(envs[0], np.stack([e._obs for e in envs]), actions, step, features, ran)
+    for e, o, c in zip(envs, res.obs, res.choice, strict=True):
+        e._obs, e._ran = o.copy(), int(c)
     return dataclasses.replace(res, infos=infos)
 
 
 def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
            step: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
-           features: Callable[[str, np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, MacroStep]:  # fmt: skip
+           features: Callable[[str, np.ndarray], np.ndarray] | None = None,
+           ran: np.ndarray | None = None) -> tuple[np.ndarray, MacroStep]:  # fmt: skip
     """One Manager decision in ``N`` worlds from ``obs [N, obs_dim]``: the macro-action logic of :func:`step_macros`,
     over any low-level stepper. ``layout`` gives the macro-actions (skills, durations, parameter blocks, hand-over,
     gamma); ``step(running, torques)`` applies ``torques [M, 9]`` to the worlds ``running`` (indices) for one control
     step and returns their ``(obs [M, obs_dim], rewards [M], terminated [M], truncated [M])``; ``features(name, idx)``
     gives the named observation feature of the worlds ``idx`` in their current state, ``[M, width]``, for the skills that
-    read features (:attr:`Skill.features`). Returns the choices and the :class:`MacroStep` (``infos`` empty: the stepper
-    keeps them)."""
+    read features (:attr:`Skill.features`); ``ran [N]`` the macro-action each world's previous decision of its episode
+    ran (-1: none), for initiation sets (:attr:`Handover.initiation`). Returns the choices run and the
+    :class:`MacroStep` (``infos`` empty: the stepper keeps them)."""
     first = layout
     n, width = len(obs), 1 + int(first.offsets[-1])
     a = np.asarray(actions, dtype=np.float64)
@@ -311,7 +318,7 @@ def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
     params = first._centre + first._half * np.clip(a[:, 1:], -1.0, 1.0)
     obs = np.array(obs, dtype=np.float64)
     if first.handover is not None and first.handover.initiation:
-        choice = initiated(first.skills, obs, choice)
+        choice = initiated(first.skills, obs, choice, ran)
     durations = first.durations[choice]
     for s, spec in enumerate(first.param_specs):  # parameters relative to a body: add its position at the start
         if spec.frame != "world":
@@ -362,15 +369,18 @@ def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
     return choice, MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, [])
 
 
-def initiated(skills: Sequence[Skill], obs: np.ndarray, choice: np.ndarray) -> np.ndarray:
+def initiated(skills: Sequence[Skill], obs: np.ndarray, choice: np.ndarray, ran: np.ndarray | None = None) -> np.ndarray:
     """The macro-action each of ``N`` states runs under initiation sets (:attr:`Handover.initiation`): ``choice [N]``
-    where its skill's set holds in ``obs [N, >=24]`` (and for the micro-action, index ``len(skills)``), else the first
-    skill whose set holds, else ``choice``. -> ``[N]`` int."""
+    where its skill's set holds in ``obs [N, >=24]``, where it is the macro-action ``ran [N]`` (the previous decision's,
+    -1 for none: a skill goes on), or where it is the micro-action (index ``len(skills)``); else the first skill whose
+    set holds; else ``choice``. -> ``[N]`` int."""
     if not skills:
         return choice
     holds = np.stack([s.initiation.holds(obs) for s in skills], axis=1)  # [N, n_skills]
     out = choice.copy()
     skill_chosen = choice < len(skills)
+    if ran is not None:
+        skill_chosen &= choice != ran
     outside = skill_chosen & ~holds[np.arange(len(choice)), np.minimum(choice, len(skills) - 1)]
     fallback = np.argmax(holds, axis=1)
     replace = outside & holds.any(axis=1)
@@ -516,6 +526,7 @@ class BatchedMacroVectorEnv:
         self.worlds, self.layout, self.gamma = worlds, layout, layout.gamma
         self._act_dim = 1 + int(layout.offsets[-1])
         self._obs: np.ndarray | None = None
+        self._ran = np.full(worlds.num_envs, -1, dtype=np.int64)  # as MacroEnv._ran, per world
 
     @property
     def num_envs(self) -> int:
@@ -545,6 +556,7 @@ class BatchedMacroVectorEnv:
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Reset every world (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
         self._obs = self.worlds.reset(seed=seed)
+        self._ran[:] = -1
         return self._obs.copy()
 
     def step(self, actions: np.ndarray) -> VectorStep:
@@ -574,12 +586,14 @@ class BatchedMacroVectorEnv:
         def features(name: str, idx: np.ndarray) -> np.ndarray:
             return worlds.features(name)[idx]
 
-        _, res = decide(self.layout, self._obs, actions, step, features)
+        _, res = decide(self.layout, self._obs, actions, step, features, self._ran)
         next_obs = res.obs
         obs = next_obs.copy()
+        self._ran[:] = res.choice
         ended = np.flatnonzero(res.terminated | res.truncated)
         if ended.size:
             obs[ended] = worlds.reset_worlds(ended)
+            self._ran[ended] = -1
         self._obs = obs
         infos = {**last, "task_reward": res.task_reward, "choice": res.choice}
         return VectorStep(obs=obs.copy(), next_obs=next_obs, rewards=res.rewards, discount=res.discount, tau=res.tau,
@@ -591,7 +605,8 @@ class BatchedMacroVectorEnv:
         if self._obs is None:
             raise RuntimeError("BatchedMacroVectorEnv: call reset() before get_state()")
         worlds = self.worlds.get_state()["envs"]
-        return {"envs": [{"env": w, "obs": o} for w, o in zip(worlds, self._obs.tolist(), strict=True)],
+        return {"envs": [{"env": w, "obs": o, "ran": int(r)} for w, o, r in zip(worlds, self._obs.tolist(), self._ran,
+                                                                              strict=True)],
                 "obs": self._obs.tolist()}  # fmt: skip
 
     def set_state(self, state: dict[str, Any]) -> None:
@@ -601,6 +616,7 @@ class BatchedMacroVectorEnv:
                              f"{self.num_envs}")  # fmt: skip
         self.worlds.set_state({"envs": [s["env"] for s in state["envs"]]})
         self._obs = np.asarray(state["obs"], dtype=np.float64).reshape(self.num_envs, self.obs_dim)
+        self._ran = np.array([int(s.get("ran", -1)) for s in state["envs"]], dtype=np.int64)
 
     def close(self) -> None:
         """Close the worlds and the layout's environment."""
