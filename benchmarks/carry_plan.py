@@ -5,9 +5,12 @@ runs, one macro-action of ``--k`` steps at a time: the Reacher to 4 cm above the
 trained) for ``--reach-calls`` calls, then the Gripper until the capsule is held (Definition 1), then the Mover with the
 task's target T (obs[24:27]) while it is held, the Gripper again if it is dropped. Prints success (d(C, T) < 3 cm at
 some step) with its 95% Wilson interval, the share of episodes in which the capsule was ever held, and the mean
-TargetDistSum beside the capsule left untouched.
+TargetDistSum beside the capsule left untouched. ``--initiation`` runs the plan under the skills' initiation sets
+(``Handover.initiation``, what a Manager of the preset reach-and-move-initiation sees): the plan's choices are all in
+their sets, so it must score the same.
 
     python benchmarks/carry_plan.py --episodes 100 [--reacher reacher-handover --gripper gripper-imitated --mover mover-held]
+        [--initiation]
 """
 
 from __future__ import annotations
@@ -26,10 +29,10 @@ C, T = slice(21, 24), slice(24, 27)
 
 
 def carry(reacher: str, gripper: str, mover: str, episodes: int, k: int, reach_calls: int,
-          library: str | None = None) -> dict[str, float]:  # fmt: skip
+          library: str | None = None, initiation: bool = False) -> dict[str, float]:  # fmt: skip
     """Success rate, held share and mean TargetDistSum (and the untouched capsule's) over ``episodes`` seeds."""
     skills = [load_skill(name, library) for name in (reacher, gripper, mover)]
-    handover = Handover(approach_height=0.0, open_torque=0.0)
+    handover = Handover(approach_height=0.0, open_torque=0.0, initiation=initiation)
     envs = [MacroEnv(make("ReachAndMove"), skills, k=k, handover=handover) for _ in range(episodes)]
     for i, e in enumerate(envs):
         e.reset(seed=i)
@@ -67,8 +70,10 @@ if __name__ == "__main__":
     ap.add_argument("--gripper", default="gripper-imitated")
     ap.add_argument("--mover", default="mover-held")
     ap.add_argument("--library", default=None, help="a skill library searched before the shipped skills")
+    ap.add_argument("--initiation", action="store_true", help="run under the skills' initiation sets")
     args = ap.parse_args()
-    r = carry(args.reacher, args.gripper, args.mover, args.episodes, args.k, args.reach_calls, args.library)
-    print(f"{args.reacher} -> {args.gripper} -> {args.mover}, {args.episodes} episodes, k = {args.k}: "
+    r = carry(args.reacher, args.gripper, args.mover, args.episodes, args.k, args.reach_calls, args.library, args.initiation)
+    sets = ", initiation sets" if args.initiation else ""
+    print(f"{args.reacher} -> {args.gripper} -> {args.mover}, {args.episodes} episodes, k = {args.k}{sets}: "
           f"success {r['success']:.2f} [{r['low']:.2f}, {r['high']:.2f}], held {r['held']:.2f}, "
           f"TargetDistSum {r['target_dist_sum']:.1f} (untouched {r['untouched']:.1f})")  # fmt: skip

@@ -672,6 +672,13 @@ def train_manager(
             "set holds (docs/skills.md); needs --handover.",
         ),
     ] = False,
+    handover_pregrasp: Annotated[
+        bool,
+        typer.Option(
+            help="Give a Reacher goals in the pre-grasp box (3 cm aside, 0-8 cm above the capsule's centre, centred 4 cm "
+            "above it) instead of 5 cm aside and 0-20 cm above (docs/skills.md); needs --handover.",
+        ),
+    ] = False,
     run_dir: _RUN_DIR = None,
     task_arg: _TASK_ARG = None,
     resume: _RESUME = False,
@@ -691,7 +698,8 @@ def train_manager(
             raise ValueError(f"{', '.join(ignored)} set{'s' if one else ''} the micro-action, which this Manager does not "
                              f"have: add --micro, or leave {'it' if one else 'them'} out")  # fmt: skip
         if ignored := [f"--{n.replace('_', '-')}" for n in ("handover_approach_height", "handover_open_torque",
-                                                              "handover_target_relative", "handover_initiation")
+                                                              "handover_target_relative", "handover_initiation",
+                                                              "handover_pregrasp")
                        if not handover and _given(ctx, n)]:  # fmt: skip
             one = len(ignored) == 1
             them = "it" if one else "them"
@@ -711,7 +719,7 @@ def train_manager(
         m = MicroAction(micro_duration, micro_penalty, micro_max_torque) if micro else None
         drive = Handover(approach_height=handover_approach_height, open_torque=handover_open_torque,
                          target_relative=handover_target_relative,
-                         initiation=handover_initiation) if handover else None  # fmt: skip
+                         initiation=handover_initiation, pregrasp=handover_pregrasp) if handover else None  # fmt: skip
         spec = MacroSpec(names, k, m, None if library is None else str(library), drive)
     except ValueError:
         if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
@@ -986,7 +994,8 @@ def _handover_flag() -> tuple[Any, Any]:
         from hrlp.skills.macro_env import Handover
 
         fresh = Handover(approach_height=p["handover_approach_height"], open_torque=p["handover_open_torque"],
-                         target_relative=p["handover_target_relative"], initiation=p["handover_initiation"])  # fmt: skip
+                         target_relative=p["handover_target_relative"], initiation=p["handover_initiation"],
+                         pregrasp=p["handover_pregrasp"])  # fmt: skip
         handover = (c.macro.handover or fresh) if v else None
         return dataclasses.replace(c, macro=dataclasses.replace(c.macro, handover=handover))
 
@@ -1062,6 +1071,7 @@ _RESUME_ACCESSORS: dict[str, tuple[Any, Any]] = {
     "handover_open_torque": _handover_field("open_torque"),
     "handover_target_relative": _handover_field("target_relative"),
     "handover_initiation": _handover_field("initiation"),
+    "handover_pregrasp": _handover_field("pregrasp"),
     "micro_duration": _micro_field("duration"),
     "micro_penalty": _micro_field("penalty"),
     "micro_max_torque": _micro_field("max_torque"),

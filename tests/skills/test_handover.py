@@ -288,3 +288,105 @@ def test_a_damaged_manifests_task_settings_are_named_when_the_skill_is_read(tmp_
     meta_path.write_text(json.dumps(raw))
     with pytest.raises(CheckpointError, match="start_distance must be two numbers"):
         SkillLibrary(tmp_path).load("g")
+
+
+def _carry_skills():
+    return [load_skill("reacher-handover"), load_skill("gripper-imitated"), load_skill("mover-held")]
+
+
+_INIT = Handover(approach_height=0.0, open_torque=0.0, target_relative=True, initiation=True)
+_NEAR = np.array([0.0, 0.0, -0.6])  # the Reacher's block for C + (0, 0, 4 cm)
+
+
+def test_a_skill_chosen_outside_its_initiation_set_runs_the_first_skill_whose_set_holds():
+    skills = _carry_skills()
+    free = MacroEnv(make("ReachAndMove", episode_steps=90), skills, k=15, handover=_INIT)
+    plain = MacroEnv(make("ReachAndMove", episode_steps=90), skills, k=15,
+                     handover=Handover(approach_height=0.0, open_torque=0.0, target_relative=True))  # fmt: skip
+    obs, _ = free.reset(seed=3)
+    plain.reset(seed=3)
+    assert obs[23] == pytest.approx(0.025) and np.linalg.norm(obs[H] - obs[C]) > 0.09  # resting, the hand far
+    # The Mover (capsule not lifted) and the Gripper (hand beyond 9 cm) chosen here: the Reacher runs, with its block.
+    _, r, *_, info = free.step((2, _NEAR, np.zeros(0), np.zeros(3)))
+    _, r_plain, *_, info_plain = plain.step((0, _NEAR, np.zeros(0), np.zeros(3)))
+    assert info["macro"] == info_plain["macro"] == "reacher-handover" and r == r_plain
+    np.testing.assert_array_equal(free.env.physics.qpos, plain.env.physics.qpos)
+    _, _, *_, info = free.step((1, _NEAR, np.zeros(0), np.zeros(3)))
+    assert info["macro"] == "reacher-handover"
+
+
+def test_a_chosen_skill_goes_on_where_it_left_the_arm_and_the_mover_starts_once_the_capsule_is_lifted():
+    macro = MacroEnv(make("ReachAndMove", episode_steps=150), _carry_skills(), k=15, handover=_INIT)
+    obs, _ = macro.reset(seed=0)
+    ran, hand = [], []
+    for t in range(10):
+        lifted = obs[23] - 0.025 > 0.01
+        choice = 0 if t < 3 else (2 if lifted else 1)
+        obs, *_, info = macro.step((choice, _NEAR, np.zeros(0), macro.block(2, obs[24:27])))
+        ran.append(info["macro"])
+        hand.append(float(np.linalg.norm(obs[H] - obs[C])))
+    assert ran[:3] == ["reacher-handover"] * 3 and "mover-held" in ran, (ran, hand)
+    grips = [i for i, name in enumerate(ran) if name == "gripper-imitated"]
+    assert grips and grips == list(range(3, 3 + len(grips))), ran  # the Gripper went on, call after call
+    state = macro.get_state()
+    assert state["ran"] == macro.names.index(ran[-1])
+    macro.reset(seed=1)
+    assert macro.get_state()["ran"] == -1
+    macro.set_state({k: v for k, v in state.items() if k != "ran"})  # a state saved before "ran": none yet
+    assert macro.get_state()["ran"] == -1
+
+
+@pytest.mark.parametrize("backend", ["loop", "rollout"])
+def test_initiation_sets_run_the_same_macro_actions_in_the_batched_worlds(backend):
+    from hrlp.envs.batched import make_batched
+    from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroVectorEnv
+
+    n, skills = 4, _carry_skills()
+    build = lambda: MacroEnv(make("ReachAndMove", episode_steps=60), skills, k=15, handover=_INIT)  # noqa: E731
+    serial = MacroVectorEnv([build() for _ in range(n)])
+    batched = BatchedMacroVectorEnv(make_batched("ReachAndMove", n, episode_steps=60, backend=backend), build())
+    obs = serial.reset(seed=5)
+    np.testing.assert_array_equal(obs, batched.reset(seed=5))
+    rng, runs = np.random.default_rng(0), []
+    for t in range(8):  # two episodes each: the record of the macro-action run is cleared at the resets
+        choice = rng.integers(0, 3, n) if t % 4 < 2 else np.where(obs[:, 23] > 0.035, 2, 1)  # reach, then grip
+        actions = np.concatenate([choice[:, None], np.tile(_NEAR, (n, 1)), rng.uniform(-1, 1, (n, 3))], axis=1)
+        a, b = serial.step(actions), batched.step(actions)
+        obs = a.obs
+        np.testing.assert_array_equal(a.infos["choice"], b.infos["choice"])
+        np.testing.assert_allclose(b.next_obs, a.next_obs, atol=1e-6)
+        runs.append(a.infos["choice"])
+    assert len(np.unique(runs)) >= 2
+    state = batched.get_state()
+    serial.set_state(state)  # the same format: the macro-actions run carry over
+    assert [e._ran for e in serial.envs] == batched._ran.tolist()
+
+
+def test_handover_initiation_round_trips_and_older_configs_read_as_off():
+    spec = MacroSpec(("reacher-handover", "gripper-imitated", "mover-held"), k=15, handover=_INIT)
+    assert MacroSpec.from_json(json.loads(json.dumps(spec.to_json()))) == spec
+    older = spec.to_json()
+    del older["handover"]["initiation"]
+    assert MacroSpec.from_json(older).handover == Handover(approach_height=0.0, open_torque=0.0, target_relative=True)
+    with pytest.raises(ValueError, match=r"Handover\.initiation must be true or false"):
+        Handover(initiation=1)
+
+
+def test_train_manager_sets_initiation_sets_and_resume_compares_them(tmp_path):
+    from typer.testing import CliRunner
+
+    from hrlp.cli import app
+
+    run = tmp_path / "m"
+    args = ["train-manager", "ReachAndMove", "--skills", "reacher-handover,gripper-imitated,mover-held", "--k", "3",
+            "--handover-initiation", "--steps", "24", "--batch-steps", "12", "--num-envs", "2", "--episode-steps", "12",
+            "--run-dir", str(run)]  # fmt: skip
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    assert MacroSpec.from_json(json.loads((run / "config.json").read_text())["macro"]).handover == Handover(initiation=True)
+    r = CliRunner().invoke(app, ["train-manager", "ReachAndMove", "--no-handover-initiation", "--steps", "48",
+                                 "--run-dir", str(run), "--resume"])  # fmt: skip
+    assert r.exit_code == 2 and "--handover-initiation False (the run: True)" in r.output, r.output
+    r = CliRunner().invoke(app, ["train-manager", "ReachAndMove", "--skills", "reacher-handover,mover-held", "--no-handover",
+                                 "--handover-initiation", "--run-dir", str(tmp_path / "x")])  # fmt: skip
+    assert r.exit_code == 2 and "--handover-initiation sets how Reachers are driven" in r.output, r.output

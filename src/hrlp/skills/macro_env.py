@@ -34,7 +34,15 @@ from hrlp.envs.arm_env import ArmEnv
 from hrlp.envs.batched import BatchedArmEnv
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
 from hrlp.envs.vector import VectorStep, check_num_envs, info_arrays, physics_seconds
-from hrlp.skills.skill import HANDOVER_POINT, HANDOVER_TARGET, MOVE_TASKS, POINT_TASKS, ParamSpec, Skill
+from hrlp.skills.skill import (
+    HANDOVER_POINT,
+    HANDOVER_PREGRASP,
+    HANDOVER_TARGET,
+    MOVE_TASKS,
+    POINT_TASKS,
+    ParamSpec,
+    Skill,
+)
 
 _HAND_XY = slice(18, 20)  # the hand H's x, y in the base observation
 
@@ -93,8 +101,15 @@ class Handover:
     has taken the arm (a Gripper's swing may leave its starts' 9 cm); a choice runs as made where no skill's set
     holds, and the micro-action always does."""
 
+    pregrasp: bool = False
+    """A point skill's goal is an offset in :data:`~hrlp.skills.skill.HANDOVER_PREGRASP`'s box (3 cm aside, 0-8 cm above
+    the capsule's centre) instead of HANDOVER_POINT's (5 cm, 0-20 cm): the Manager's first goals, the box's centre 4 cm
+    above C, leave the palm where a Gripper starts. Only with ``relative``."""
+
     def __post_init__(self) -> None:
-        for name in ("relative", "target_relative", "initiation"):
+        if self.pregrasp is True and self.relative is False:
+            raise ValueError("Handover.pregrasp is a box of capsule-relative goals: it needs relative=True")
+        for name in ("relative", "target_relative", "initiation", "pregrasp"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Handover.{name} must be true or false, got {getattr(self, name)!r}")
         for name in ("open_torque", "approach_height", "approach_radius"):
@@ -181,7 +196,7 @@ class MacroEnv(gym.Env):
         box for point skills (``relative``) and the target-relative box for moving skills (``target_relative``)."""
         h = self.handover
         if h and h.relative and point:
-            return HANDOVER_POINT
+            return HANDOVER_PREGRASP if h.pregrasp else HANDOVER_POINT
         if h and h.target_relative and skill.task in MOVE_TASKS:
             return HANDOVER_TARGET
         return skill.param

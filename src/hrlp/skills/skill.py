@@ -100,6 +100,11 @@ HANDOVER_TARGET = ParamSpec(3, (-0.1, -0.1, -0.1), (0.1, 0.1, 0.1), "offset of t
 #: aside and 0-20 cm above its centre: where a grip starts (docs/skills.md, "Skills that hand over").
 HANDOVER_POINT = ParamSpec(3, (-0.05, -0.05, 0.0), (0.05, 0.05, 0.20), "offset of the hand's goal from the capsule's "
                            "centre C (x, y, z), metres", frame="capsule")  # fmt: skip
+#: The pre-grasp parameterisation of a point skill (``Handover.pregrasp``): an offset at most 3 cm aside and 0-8 cm above
+#: C, centred 4 cm above it (the lowest goal ReacherHandover trains on), so that a Manager's first goals already leave the
+#: palm where a Gripper starts (within 9 cm of C), not HANDOVER_POINT's centre 10 cm up.
+HANDOVER_PREGRASP = ParamSpec(3, (-0.03, -0.03, 0.0), (0.03, 0.03, 0.08), "offset of the hand's pre-grasp goal from the "
+                              "capsule's centre C (x, y, z), metres", frame="capsule")  # fmt: skip
 
 
 #: Height of the capsule's centre above its resting height, metres, above which it counts as lifted (held): a capsule in
