@@ -1,6 +1,7 @@
 """Skills that hand over: capsule-relative goals, the approach from above, the open claw, parameters declared in code."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -370,6 +371,23 @@ def test_handover_initiation_round_trips_and_older_configs_read_as_off():
     assert MacroSpec.from_json(older).handover == Handover(approach_height=0.0, open_torque=0.0, target_relative=True)
     with pytest.raises(ValueError, match=r"Handover\.initiation must be true or false"):
         Handover(initiation=1)
+    pregrasp = MacroSpec(spec.skills, k=50, handover=replace(_INIT, pregrasp=True))
+    assert MacroSpec.from_json(json.loads(json.dumps(pregrasp.to_json()))) == pregrasp
+    with pytest.raises(ValueError, match="pregrasp is a box of capsule-relative goals"):
+        Handover(relative=False, pregrasp=True)
+
+
+def test_pregrasp_goals_centre_4_cm_above_the_capsule_within_the_grippers_reach():
+    from hrlp.skills.skill import HANDOVER_PREGRASP
+
+    macro = MacroEnv(make("ReachAndMove", episode_steps=150), _carry_skills(), k=15, handover=replace(_INIT, pregrasp=True))
+    obs, _ = macro.reset(seed=4)
+    assert macro.param_specs[0] == HANDOVER_PREGRASP
+    assert macro.parameters(0, np.zeros(3)) == pytest.approx(obs[C] + (0, 0, 0.04))  # the Manager's first mean goal
+    assert macro.parameters(0, np.ones(3)) == pytest.approx(obs[C] + (0.03, 0.03, 0.08))
+    for _ in range(3):  # from its first mean goal the Reacher leaves the palm where the Gripper starts
+        obs, *_, info = macro.step((0, np.zeros(3), np.zeros(0), np.zeros(3)))
+    assert np.linalg.norm(obs[H] - obs[C]) < 0.09 and macro.skills[1].initiation.holds(obs[None])[0]
 
 
 def test_train_manager_sets_initiation_sets_and_resume_compares_them(tmp_path):

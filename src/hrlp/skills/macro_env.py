@@ -397,7 +397,10 @@ def initiated(skills: Sequence[Skill], obs: np.ndarray, choice: np.ndarray, ran:
     if ran is not None:
         skill_chosen &= choice != ran
     outside = skill_chosen & ~holds[np.arange(len(choice)), np.minimum(choice, len(skills) - 1)]
-    fallback = np.argmax(holds, axis=1)
+    n_skills = len(skills)
+    before = holds & (np.arange(n_skills)[None, :] < choice[:, None])  # the skills that come before the choice
+    last_before = n_skills - 1 - np.argmax(before[:, ::-1], axis=1)
+    fallback = np.where(before.any(axis=1), last_before, np.argmax(holds, axis=1))
     replace = outside & holds.any(axis=1)
     out[replace] = fallback[replace]
     return out
