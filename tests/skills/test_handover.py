@@ -299,7 +299,25 @@ _INIT = Handover(approach_height=0.0, open_torque=0.0, target_relative=True, ini
 _NEAR = np.array([0.0, 0.0, -0.6])  # the Reacher's block for C + (0, 0, 4 cm)
 
 
-def test_a_skill_chosen_outside_its_initiation_set_runs_the_first_skill_whose_set_holds():
+def test_a_choice_outside_its_set_runs_the_nearest_skill_before_it_whose_set_holds():
+    from hrlp.skills.macro_env import initiated
+
+    skills = _carry_skills()  # resting; the hand within 9 cm; lifted
+    c0 = np.array([0.0, 0.0, 0.025])
+    far, near, up = (0.0, 0.0, 0.3), (0.0, 0.0, 0.05), (0.0, 0.0, 0.03)
+    states = {"far, resting": (c0 + far, c0), "near, resting": (c0 + near, c0), "near, lifted": (c0 + up + near, c0 + up),
+              "far, lifted": (c0 + up + far, c0 + up)}  # fmt: skip
+    obs = _base(*map(np.array, zip(*states.values(), strict=True)))
+    run = {c: initiated(skills, obs, np.full(4, c)).tolist() for c in range(4)}
+    assert run[2] == [0, 1, 2, 2]  # the Mover: reach, then grip, then carry (its prerequisites first)
+    assert run[1] == [0, 1, 1, 2]  # the Gripper: reach first; lifted out of reach: the one skill whose set holds
+    assert run[0] == [0, 0, 1, 2]  # the Reacher while the capsule is lifted: nothing before it, the first that holds
+    assert run[3] == [3, 3, 3, 3]  # the micro-action (index len(skills)) always runs
+    going_on = initiated(skills, obs, np.full(4, 1), ran=np.array([1, 0, -1, 1]))
+    assert going_on.tolist() == [1, 1, 1, 1]  # a Gripper chosen again goes on, wherever it took the arm
+
+
+def test_a_skill_chosen_outside_its_initiation_set_runs_another_with_its_own_block():
     skills = _carry_skills()
     free = MacroEnv(make("ReachAndMove", episode_steps=90), skills, k=15, handover=_INIT)
     plain = MacroEnv(make("ReachAndMove", episode_steps=90), skills, k=15,
@@ -386,7 +404,7 @@ def test_pregrasp_goals_centre_4_cm_above_the_capsule_within_the_grippers_reach(
     assert macro.parameters(0, np.zeros(3)) == pytest.approx(obs[C] + (0, 0, 0.04))  # the Manager's first mean goal
     assert macro.parameters(0, np.ones(3)) == pytest.approx(obs[C] + (0.03, 0.03, 0.08))
     for _ in range(3):  # from its first mean goal the Reacher leaves the palm where the Gripper starts
-        obs, *_, info = macro.step((0, np.zeros(3), np.zeros(0), np.zeros(3)))
+        obs, *_ = macro.step((0, np.zeros(3), np.zeros(0), np.zeros(3)))
     assert np.linalg.norm(obs[H] - obs[C]) < 0.09 and macro.skills[1].initiation.holds(obs[None])[0]
 
 

@@ -96,10 +96,11 @@ class Handover:
     initiation: bool = False
     """Each skill starts only from its initiation set (:attr:`Skill.initiation`: the states like those it was trained
     from, e.g. a Mover trained from held starts while the capsule is lifted): a choice outside its skill's set runs the
-    first skill, in the Manager's order, whose set holds (with its own parameter block), and the choice run is the
-    one reported (``info['macro']``, the decision shares). A skill chosen again right after it ran goes on wherever it
-    has taken the arm (a Gripper's swing may leave its starts' 9 cm); a choice runs as made where no skill's set
-    holds, and the micro-action always does."""
+    nearest skill before it in the Manager's order whose set holds (list skills in the order they chain: a Mover chosen
+    before the capsule is held runs the Gripper, or the Reacher while the hand is far), else the first skill whose set
+    holds, each with its own parameter block; the choice run is the one reported (``info['macro']``, the decision
+    shares). A skill chosen again right after it ran goes on wherever it has taken the arm (a Gripper's swing may leave
+    its starts' 9 cm); a choice runs as made where no skill's set holds, and the micro-action always does."""
 
     pregrasp: bool = False
     """A point skill's goal is an offset in :data:`~hrlp.skills.skill.HANDOVER_PREGRASP`'s box (3 cm aside, 0-8 cm above
@@ -387,8 +388,9 @@ def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
 def initiated(skills: Sequence[Skill], obs: np.ndarray, choice: np.ndarray, ran: np.ndarray | None = None) -> np.ndarray:
     """The macro-action each of ``N`` states runs under initiation sets (:attr:`Handover.initiation`): ``choice [N]``
     where its skill's set holds in ``obs [N, >=24]``, where it is the macro-action ``ran [N]`` (the previous decision's,
-    -1 for none: a skill goes on), or where it is the micro-action (index ``len(skills)``); else the first skill whose
-    set holds; else ``choice``. -> ``[N]`` int."""
+    -1 for none: a skill goes on), or where it is the micro-action (index ``len(skills)``); else the nearest skill before
+    it whose set holds (its prerequisite in a chain listed in order); else the first skill whose set holds; else
+    ``choice``. -> ``[N]`` int."""
     if not skills:
         return choice
     holds = np.stack([s.initiation.holds(obs) for s in skills], axis=1)  # [N, n_skills]
