@@ -73,7 +73,7 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     assert all(r.config.macro is None or r.config.macro.handover is None
                for p in PRESETS.values() if "handover" not in p.name
                and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated", "reach-and-grip-1-imitated",
-                                 "reach-and-move-imitated", "reach-and-move-initiation") for r in p.runs)  # fmt: skip
+                                 "reach-and-move-imitated", "reach-and-move-chained") for r in p.runs)  # fmt: skip
     # The imitated grid is the reacher-handover grid and the tuned gripper + micro cells with gripper-imitated in place
     # of the gripper, and nothing else.
     reacher_handover = {r.name: r.config for r in PRESETS["reach-and-grip-2-reacher-handover"].runs}
@@ -97,12 +97,14 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     assert carry.config.macro.handover == Handover(approach_height=0.0, open_torque=0.0, target_relative=True)
     assert (carry.config.batch_steps, carry.config.trpo.max_kl, carry.config.init_log_std) == (2_000, 0.02, -1.0)
     assert carry.paper == -41.470  # Figure 5's best cell, s-reacher + mover-noised
-    # With initiation sets: the same runs, each skill started only from its initiation set, and nothing else.
-    initiation = PRESETS["reach-and-move-initiation"].runs
-    assert [r.name for r in initiation] == [f"{r.name},initiation" for r in (carry, carry_10)]
-    for r, base in zip(initiation, (carry, carry_10), strict=True):
-        assert r.config.macro.handover == replace(base.config.macro.handover, initiation=True) and r.paper == base.paper
-        assert replace(r.config, macro=replace(r.config.macro, handover=base.config.macro.handover)) == base.config
+    # The chain with initiation sets: the same skills and paper cell, k = 50, pre-grasp goals, from the fast defaults.
+    chained = PRESETS["reach-and-move-chained"].runs
+    assert [r.name for r in chained] == [f"{r.name},chained" for r in (carry, carry_10)]
+    for r, base in zip(chained, (carry, carry_10), strict=True):
+        assert r.config.macro.skills == base.config.macro.skills and r.config.macro.k == 50 and r.paper == base.paper
+        assert r.config.macro.handover == replace(base.config.macro.handover, initiation=True, pregrasp=True)
+        assert (r.config.batch_steps, r.config.trpo.max_kl, r.config.init_log_std) == (600, 0.02, -2.0)
+        assert r.config.task_kwargs == base.config.task_kwargs and r.config.backend == "batched"
     # Figure 6 with the imitated skills: each hand-over cell with reacher-handover (capsule-relative goals only) and
     # gripper-imitated in place of the paper's skills, and nothing else.
     for r in PRESETS["reach-and-grip-1-imitated"].runs:
