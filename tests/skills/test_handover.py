@@ -315,6 +315,8 @@ def test_a_choice_outside_its_set_runs_the_nearest_skill_before_it_whose_set_hol
     assert run[3] == [3, 3, 3, 3]  # the micro-action (index len(skills)) always runs
     going_on = initiated(skills, obs, np.full(4, 1), ran=np.array([1, 0, -1, 1]))
     assert going_on.tolist() == [1, 1, 1, 1]  # a Gripper chosen again goes on, wherever it took the arm
+    prerequisite = initiated(skills, obs, np.full(4, 2), ran=np.array([1, 1, 0, -1]))
+    assert prerequisite.tolist() == [1, 1, 2, 2]  # the Mover chosen while the Gripper is at work: the Gripper goes on
 
 
 def test_a_skill_chosen_outside_its_initiation_set_runs_another_with_its_own_block():

@@ -99,8 +99,9 @@ class Handover:
     nearest skill before it in the Manager's order whose set holds (list skills in the order they chain: a Mover chosen
     before the capsule is held runs the Gripper, or the Reacher while the hand is far), else the first skill whose set
     holds, each with its own parameter block; the choice run is the one reported (``info['macro']``, the decision
-    shares). A skill chosen again right after it ran goes on wherever it has taken the arm (a Gripper's swing may leave
-    its starts' 9 cm); a choice runs as made where no skill's set holds, and the micro-action always does."""
+    shares). The skill that ran last counts as available wherever it has taken the arm (a Gripper's swing may leave its
+    starts' 9 cm), so a Mover chosen while the Gripper is still at work lets it go on; a choice runs as made where no
+    skill is available, and the micro-action always does."""
 
     pregrasp: bool = False
     """A point skill's goal is an offset in :data:`~hrlp.skills.skill.HANDOVER_PREGRASP`'s box (3 cm aside, 0-8 cm above
@@ -386,24 +387,26 @@ def decide(layout: MacroEnv, obs: np.ndarray, actions: np.ndarray,
 
 
 def initiated(skills: Sequence[Skill], obs: np.ndarray, choice: np.ndarray, ran: np.ndarray | None = None) -> np.ndarray:
-    """The macro-action each of ``N`` states runs under initiation sets (:attr:`Handover.initiation`): ``choice [N]``
-    where its skill's set holds in ``obs [N, >=24]``, where it is the macro-action ``ran [N]`` (the previous decision's,
-    -1 for none: a skill goes on), or where it is the micro-action (index ``len(skills)``); else the nearest skill before
-    it whose set holds (its prerequisite in a chain listed in order); else the first skill whose set holds; else
-    ``choice``. -> ``[N]`` int."""
+    """The macro-action each of ``N`` states runs under initiation sets (:attr:`Handover.initiation`).
+
+    A skill is available where its set holds in ``obs [N, >=24]`` or where it is the skill ``ran [N]`` ran last (the
+    previous decision's, -1 for none: a running skill goes on wherever it took the arm). ``choice [N]`` runs where its
+    skill is available, and the micro-action (index ``len(skills)``) always; else the nearest available skill before it
+    in the Manager's order (its prerequisite, for skills listed in the order they chain); else the first available
+    skill; else ``choice``. -> ``[N]`` int."""
     if not skills:
         return choice
-    holds = np.stack([s.initiation.holds(obs) for s in skills], axis=1)  # [N, n_skills]
-    out = choice.copy()
-    skill_chosen = choice < len(skills)
+    n, n_skills = len(choice), len(skills)
+    available = np.stack([s.initiation.holds(obs) for s in skills], axis=1)  # [N, n_skills]
     if ran is not None:
-        skill_chosen &= choice != ran
-    outside = skill_chosen & ~holds[np.arange(len(choice)), np.minimum(choice, len(skills) - 1)]
-    n_skills = len(skills)
-    before = holds & (np.arange(n_skills)[None, :] < choice[:, None])  # the skills that come before the choice
+        going = (ran >= 0) & (ran < n_skills)
+        available[np.flatnonzero(going), ran[going]] = True
+    outside = (choice < n_skills) & ~available[np.arange(n), np.minimum(choice, n_skills - 1)]
+    before = available & (np.arange(n_skills)[None, :] < choice[:, None])  # the skills that come before the choice
     last_before = n_skills - 1 - np.argmax(before[:, ::-1], axis=1)
-    fallback = np.where(before.any(axis=1), last_before, np.argmax(holds, axis=1))
-    replace = outside & holds.any(axis=1)
+    fallback = np.where(before.any(axis=1), last_before, np.argmax(available, axis=1))
+    replace = outside & available.any(axis=1)
+    out = choice.copy()
     out[replace] = fallback[replace]
     return out
 
