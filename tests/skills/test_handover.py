@@ -327,8 +327,13 @@ def test_a_skill_chosen_outside_its_initiation_set_runs_another_with_its_own_blo
     obs, _ = free.reset(seed=3)
     plain.reset(seed=3)
     assert obs[23] == pytest.approx(0.025) and np.linalg.norm(obs[H] - obs[C]) > 0.09  # resting, the hand far
-    # The Mover (capsule not lifted) and the Gripper (hand beyond 9 cm) chosen here: the Reacher runs, with its block.
+    # The Mover (capsule not lifted) and the Gripper (hand beyond 9 cm) chosen here: the Reacher runs, with its block,
+    # and the rendered frames are labelled with it.
+    assert (free.would_run(2), free.would_run(1), plain.would_run(2)) == (0, 0, 2)
+    labels: list[str] = []
+    free.on_substep = labels.append
     _, r, *_, info = free.step((2, _NEAR, np.zeros(0), np.zeros(3)))
+    assert labels == ["reacher-handover"] * 15
     _, r_plain, *_, info_plain = plain.step((0, _NEAR, np.zeros(0), np.zeros(3)))
     assert info["macro"] == info_plain["macro"] == "reacher-handover" and r == r_plain
     np.testing.assert_array_equal(free.env.physics.qpos, plain.env.physics.qpos)

@@ -112,8 +112,9 @@ def collect_handover_states(
     keep: Callable[[ArmPhysics], bool] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Physics states ``(qpos [states, nq], qvel [states, nv])`` at which the Manager of ``manager_run``, sampling
-    its actions, chose ``skill`` (and, with ``keep``, for which ``keep(physics)`` holds, e.g. :func:`graspable`), the
-    number of episodes it took and the number of hand-overs ``keep`` refused. Raises ValueError if the Manager has no
+    its actions, ran ``skill`` (its choice, or under initiation sets the skill the choice ran) and, with ``keep``, for
+    which ``keep(physics)`` holds (e.g. :func:`graspable`), the number of episodes it took and the number of hand-overs
+    ``keep`` refused. Raises ValueError if the Manager has no
     such skill or never chooses it (or no state is kept) in 200 episodes."""
     from hrlp.train import load_trained
 
@@ -137,7 +138,7 @@ def collect_handover_states(
         episodes += 1
         while True:
             action = trained.act(env, obs, gen, deterministic=False)
-            if int(action[0]) == index and len(qpos) < states:
+            if env.would_run(int(action[0])) == index and len(qpos) < states:  # the skill run (initiation sets)
                 if keep is not None and not keep(physics):
                     refused += 1
                 else:

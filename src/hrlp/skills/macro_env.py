@@ -222,6 +222,13 @@ class MacroEnv(gym.Env):
         state = self._obs if obs is None else np.asarray(obs, dtype=np.float64)
         return self.param_specs[choice].origin(state.reshape(1, -1))[0]
 
+    def would_run(self, choice: int) -> int:
+        """The macro-action that ``choice`` runs from the current state: itself, or under initiation sets
+        (:attr:`Handover.initiation`) the one :func:`initiated` picks."""
+        if self.handover is None or not self.handover.initiation:
+            return int(choice)
+        return int(initiated(self.skills, self._obs[None], np.array([choice]), np.array([self._ran]))[0])
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         """Reset the low-level task."""
         super().reset(seed=seed)
@@ -282,7 +289,7 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     waits. Raises ValueError for a wrong shape, NaN/inf, or a choice that is not one of the macro-actions.
     """
     infos: list[dict[str, Any]] = [{} for _ in envs]
-    runs: np.ndarray | None = None  # the macro-actions run, for on_substep's labels
+    runs: list[int] | None = None  # the macro-actions run, for on_substep's labels
 
     def step(running: np.ndarray, torques: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         nonlocal runs
@@ -292,11 +299,9 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
             rows.append(env.env.step(t))
             infos[i] = rows[-1][4]
             if env.on_substep is not None:
-                if runs is None:  # decide() has checked the actions; the envs' _obs are still the decision's start
-                    runs = np.asarray(actions, dtype=np.float64)[:, 0].astype(np.int64)
-                    if envs[0].handover is not None and envs[0].handover.initiation:
-                        runs = initiated(envs[0].skills, np.stack([e._obs for e in envs]), runs, ran)
-                env.on_substep(env.names[int(runs[i])])
+                if runs is None:  # decide() has checked the actions; the envs are still at the decision's start
+                    runs = [e.would_run(int(a[0])) for e, a in zip(envs, np.asarray(actions), strict=True)]
+                env.on_substep(env.names[runs[i]])
         obs, r, term, trunc, _ = zip(*rows, strict=True)
         return np.stack(obs), np.array(r, dtype=np.float64), np.array(term, dtype=bool), np.array(trunc, dtype=bool)
 
