@@ -1,6 +1,7 @@
 """Why a Gripper fails and what its reward pays for: a skill's greedy episodes on its own start set.
 
-Prints, for the skill (default: the shipped ``gripper``) on ``Gripper`` with the shipped recipe's start set:
+Prints, for the skill (default: the shipped ``gripper``; a skill that reads observation features, such as
+``gripper-imitated``, is given them from the physics) on ``Gripper`` with the shipped recipe's start set:
 
 - success (Definition 1) over ``--episodes`` episodes of ``--steps`` control steps, and the step of first success;
 - where the capsule sits in the palm's frame while the claw is closed on it (finger gap < 3 cm, H within 8 cm of C),
@@ -47,7 +48,8 @@ def main() -> None:
         first, min_d = -1, np.inf
         info: dict = {}
         for t in range(args.steps):
-            obs, _, _, trunc, info = env.step(skill.act(obs[None, :24], np.zeros((1, 0)))[0])
+            features = np.concatenate([p.feature(name) for name in skill.features])[None] if skill.features else None
+            obs, _, _, trunc, info = env.step(skill.act(obs[None, :24], np.zeros((1, 0)), features)[0])
             min_d = min(min_d, p.hand_to_capsule())
             if info["success"] and first < 0:
                 first = t + 1
