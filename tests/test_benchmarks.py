@@ -4,6 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
@@ -84,4 +85,32 @@ def test_gripper_variants_retrains_the_shipped_gripper_and_reports_both_start_se
         "handover", "own", "paper_default", "graspable_handover"}  # fmt: skip
     again = _run("gripper_variants.py", f"--bank {tmp_path / 'bank.npz'} --evaluate {tmp_path / 'v' / 'skill'} "
                  f"--out {tmp_path / 'e'}", tmp_path)  # fmt: skip
+    assert again.returncode == 2 and "exists" in again.stderr
+
+
+def test_gripper_handover_collects_three_banks_and_evaluates_every_start_set(tmp_path):
+    manager = subprocess.run(["hrlp", "train-manager", "ReachAndGrip2", "--skills", "gripper-imitated,reacher-handover",
+                              "--steps", "200", "--batch-steps", "20", "--num-envs", "2", "--workers", "1", "--run-dir",
+                              str(tmp_path / "m")], capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert manager.returncode == 0, manager.stderr[-2000:]
+    args = f"{tmp_path / 'm'} --states 2 --episodes 1 --steps 20 --out {tmp_path / 'gh'}"
+    out = _run("gripper_handover.py", args, tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    results = __import__("json").loads((tmp_path / "gh" / "results.json").read_text())
+    assert set(results["gripper-imitated"]) == {"own", "paper", "all", "not_held", "initiation_not_held"}
+    for bank in ("all", "not_held", "initiation_not_held"):
+        assert f"bank {bank}: 2 hand-over states" in out.stdout and (tmp_path / "gh" / f"{bank}.npz").is_file()
+    from hrlp.envs import make
+    from hrlp.envs.tasks import SparseSuccess, start_bank
+    from hrlp.skills import load_skill
+
+    env = make("Gripper")
+    env.reset(seed=0)
+    physics, initiation = env.unwrapped.physics, load_skill("gripper-imitated").initiation
+    for q, v in zip(*start_bank(str(tmp_path / "gh" / "initiation_not_held.npz")), strict=True):
+        physics.set_state_vectors(q, v)
+        physics.forward()
+        assert not SparseSuccess()(physics)
+        assert initiation.holds(np.concatenate([np.zeros(18), physics.hand, physics.capsule])[None])[0]
+    again = _run("gripper_handover.py", args, tmp_path)
     assert again.returncode == 2 and "exists" in again.stderr
