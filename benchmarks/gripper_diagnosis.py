@@ -48,7 +48,7 @@ def main() -> None:
         first, min_d = -1, np.inf
         info: dict = {}
         for t in range(args.steps):
-            features = np.concatenate([p.feature(name) for name in skill.features])[None] if skill.features else None
+            features = skill.features_of([p])
             obs, _, _, trunc, info = env.step(skill.act(obs[None, :24], np.zeros((1, 0)), features)[0])
             min_d = min(min_d, p.hand_to_capsule())
             if info["success"] and first < 0:

@@ -48,7 +48,7 @@ def success(skill: Skill, task_kwargs: dict[str, Any], episodes: int, steps: int
         obs, _ = env.reset(seed=10_000 + ep)
         won = False
         for _ in range(steps):
-            features = np.concatenate([p.feature(name) for name in skill.features])[None] if skill.features else None
+            features = skill.features_of([p])
             obs, _, _, truncated, info = env.step(skill.act(obs[None, :24], np.zeros((1, 0)), features)[0])
             won |= bool(info["success"])
             if truncated:
