@@ -87,6 +87,20 @@ class ScriptedGraspConfig:
     clearance: float = 0.015
     """Height the claw's lowest point (H or a finger tip) keeps above the capsule's top while it is not over the
     capsule, metres: a hand lower than that near the capsule first rises."""
+    clear_margin: float = 0.01
+    """Extra height over the needed clearance to which a move over the capsule raises the claw, metres (so that the
+    move does not take turns with rising)."""
+    transit_clearance: float = 0.03
+    """The clearance kept instead of ``clearance`` while the arm is far from the plan's line (joints or palm
+    orientation beyond the funnel), metres."""
+    rise_below: float = 0.005
+    """Clearance under which the claw rises straight up (and a little away) before any move over the capsule,
+    metres; above it, moves over the capsule raise the claw as they go (``clear_margin``)."""
+    rise_retreat: float = 0.01
+    """Horizontal step away from the capsule taken with each rise, metres."""
+    rise_slack: float = 0.008
+    """How far below the needed clearance the claw may dip (while a move over the capsule brings it back up) before
+    the controller stops and rises, metres."""
     max_lines: int = 4
     """Most distinct arm configurations (lines) a plan keeps."""
     cache_size: int = 512
@@ -159,6 +173,7 @@ class ScriptedGrasp:
         self._hand = m.site("hand").id
         self._object_geom = m.geom("object").id
         self._table = m.geom("table").id
+        self._tip_sites = (m.site("tip_right").id, m.site("tip_left").id)
         self._arm_geoms = sorted(physics._arm_geoms)
         self._jacp = np.zeros((3, m.nv))
         self._jacr = np.zeros((3, m.nv))
@@ -193,7 +208,9 @@ class ScriptedGrasp:
         g, gz = cfg.position_grid, cfg.height_grid
         n_yaw = max(1, round(math.pi / cfg.yaw_grid))
         yaw = round(self._capsule_yaw() / math.pi * n_yaw) % n_yaw
-        return (round(c[0] / g), round(c[1] / g), round(c[2] / gz), yaw)
+        # The height relative to the resting height: a capsule lying on the table (z = its radius, a half-way point of
+        # an absolute grid) would otherwise flip between two plans with the last digit of its height.
+        return (round(c[0] / g), round(c[1] / g), round((c[2] - CAPSULE_REST_Z) / gz), yaw)
 
     def plan(self) -> GraspPlan:
         """The plan for the current capsule pose (cached per rounded pose: a pure function of the state)."""
@@ -205,7 +222,7 @@ class ScriptedGrasp:
             return hit
         cfg = self.config
         n_yaw = max(1, round(math.pi / cfg.yaw_grid))
-        capsule = np.array([key[0] * cfg.position_grid, key[1] * cfg.position_grid, key[2] * cfg.height_grid])
+        capsule = np.array([key[0] * cfg.position_grid, key[1] * cfg.position_grid, CAPSULE_REST_Z + key[2] * cfg.height_grid])
         plan = self._make_plan(capsule, key[3] * math.pi / n_yaw)
         self.plans_made += 1
         self._cache[key] = plan
@@ -335,10 +352,12 @@ class ScriptedGrasp:
         capsule leaves the arm's reach (behind the base)."""
         return min(self.config.approach_height, float(line.heights[-1]))
 
-    def _needed_clearance(self, line: GraspLine) -> float:
+    def _needed_clearance(self, line: GraspLine, far: bool = False) -> float:
         # No more than the top of the line offers (open tips about 1.8 cm below H), so that rising and moving over it
-        # do not take turns.
-        return min(self.config.clearance, float(line.heights[-1]) - 0.018 - CAPSULE_RADIUS - 0.005)
+        # do not take turns. An arm far from the line in joint space turns its palm on the way, which swings the finger
+        # tips: it keeps the larger transit clearance.
+        wanted = self.config.transit_clearance if far else self.config.clearance
+        return min(wanted, float(line.heights[-1]) - 0.018 - CAPSULE_RADIUS - 0.005)
 
     def _held(self) -> bool:
         """Definition 1 now: finger tips closer than 3 cm and d(H, C) < 5 cm."""
@@ -372,7 +391,10 @@ class ScriptedGrasp:
             phase = "close"
         elif aligned and rho < cfg.funnel_radius:
             phase = "descend"
-        elif clearance < self._needed_clearance(line) and rho < cfg.funnel_radius + 0.07:
+        elif (
+            clearance < min(cfg.rise_below, self._needed_clearance(line, not aligned) - cfg.rise_slack)
+            and rho < cfg.funnel_radius + 0.07
+        ):
             phase = "rise"  # the claw is low beside the capsule: straight up first, so the move over it sweeps nothing
         else:
             phase = "over"
@@ -395,20 +417,51 @@ class ScriptedGrasp:
                 q = self.target(plan, line, 0.0, lowest=CAPSULE_REST_Z + cfg.close_lift)
             elif phase == "rise":
                 # Straight up from where the hand is, keeping the palm's orientation, so the fingers do not sweep.
-                goal = p.hand + np.array([0.0, 0.0, self._needed_clearance(line) + 0.015 - float(s["clearance"])])
+                far = float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle
+                goal = p.hand + np.array([0.0, 0.0, self._needed_clearance(line, far) + 0.015 - float(s["clearance"])])
+                away = p.hand[:2] - p.capsule[:2]
+                goal[:2] += cfg.rise_retreat * away / max(float(np.linalg.norm(away)), 1e-6)
                 self._scratch.qpos[:] = p.data.qpos
                 q, _, _ = self._ik(goal, p.data.xmat[self._claw].reshape(3, 3).copy(), p.qpos.copy(), 15)
             else:
                 f_rho = np.clip((rho - cfg.align_radius) / (cfg.funnel_radius - cfg.align_radius), 0.0, 1.0)
                 f_ang = np.clip((angle - cfg.align_angle) / (cfg.funnel_angle - cfg.align_angle), 0.0, 1.0)
-                q = self.target(plan, line, self.approach_height(line) * float(max(f_rho, f_ang)))
+                far = float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle
+                # An arm far from the line turns into it at the top of the line, away from the capsule.
+                top = float(line.heights[-1]) if far else self.approach_height(line)
+                q = self.target(plan, line, top * float(max(f_rho, f_ang)))
             q = q.copy()
-            q[:ARM_JOINTS] = p.qpos[:ARM_JOINTS] + np.clip(q[:ARM_JOINTS] - p.qpos[:ARM_JOINTS], -cfg.max_step, cfg.max_step)
-        q[7:] = (-cfg.open_angle, cfg.open_angle)
+            # The whole step scaled down (not each joint clipped), so that the move keeps its direction in joint space.
+            dq = q[:ARM_JOINTS] - p.qpos[:ARM_JOINTS]
+            q[:ARM_JOINTS] = p.qpos[:ARM_JOINTS] + dq * min(1.0, cfg.max_step / max(float(np.abs(dq).max()), 1e-9))
+            if phase == "over":
+                q = self._keep_clear(q, line, far)
+        # The fingers open, but while rising they stay as they are: a finger low beside the capsule would swing into it.
+        q[7:] = p.qpos[7:9] if phase == "rise" else (-cfg.open_angle, cfg.open_angle)
         u = self._computed_torque(q) / GEARS
         if phase in ("hold", "close"):
             u[7:] = (1.0, -1.0)
         return np.clip(u, -1.0, 1.0)
+
+    def _keep_clear(self, q: np.ndarray, line: GraspLine, far: bool) -> np.ndarray:
+        """``q`` [9] raised, if needed, so that the claw's lowest point (H or an open finger tip) keeps the needed
+        clearance above the capsule's top wherever H is within ``funnel_radius + 0.07`` of the capsule horizontally: a
+        move in joint space towards a distant line may otherwise dip the claw into the capsule on the way."""
+        cfg, p, m, d = self.config, self._now, self._now.model, self._scratch
+        d.qpos[:] = p.data.qpos
+        d.qpos[:N_JOINTS] = q
+        d.qpos[7:9] = (-cfg.open_angle, cfg.open_angle)
+        mujoco.mj_kinematics(m, d)
+        h, c = d.site_xpos[self._hand].copy(), p.capsule
+        if math.hypot(h[0] - c[0], h[1] - c[1]) >= cfg.funnel_radius + 0.07:
+            return q
+        lowest = min(h[2], *(d.site_xpos[t][2] for t in self._tip_sites)) - c[2] - CAPSULE_RADIUS
+        need = max(self._needed_clearance(line, far), 0.0) + cfg.clear_margin
+        if lowest >= need:
+            return q
+        raised, _, _ = self._ik(h + np.array([0.0, 0.0, need - lowest]), d.xmat[self._claw].reshape(3, 3).copy(), q, 15)
+        raised[7:] = q[7:]
+        return raised
 
     def _computed_torque(self, q: np.ndarray) -> np.ndarray:
         p, w = self._now, self.config.omega
