@@ -17,8 +17,12 @@ so it can label states it never visited itself (DAgger). Its design, measured in
 - **Motion**: computed torque ``tau = M (w^2 (q* - q) - 2 w qdot) + qfrc_bias`` towards a joint target ``q*`` on that
   line, divided by the gears and clipped to [-1, 1]. The height of the target is a funnel: the further H is from the
   line (horizontally) or the palm from the grasp orientation, the higher the target, so the hand comes down only once
-  it is over the capsule and aligned. A hand low beside the capsule first rises in place (so its fingers do not sweep
-  the capsule) before it moves over it.
+  it is over the capsule and aligned. An arm far from the line (in joint space or the palm's orientation) turns into
+  it at the top of the line and keeps a larger (transit) clearance, since turning the palm swings the finger tips. Each
+  step towards the target is scaled down as a whole (not clipped per joint), so the move keeps its direction, and a
+  step that would bring the claw's lowest point (H or an open tip) below the needed clearance while it is near the
+  capsule is raised by inverse kinematics. A claw lower than that beside the capsule first rises straight up and a
+  little away, its fingers held as they are (opening them could swing a finger into the capsule).
 - **Fingers**: held open (computed torque to -0.6 / +0.6 rad) until H is aligned and within ``close_height`` of the
   grasp, then closed with full torque; they stay closed while Definition 1 holds.
 """
