@@ -226,9 +226,11 @@ def _appendix_c_tuned() -> tuple[Preset, ...]:
 
 #: The imitated Gripper's imitation (docs/results/README.md, "Imitation, then TRPO"): 150 expert episodes and 250 with
 #: DART noise of std 0.3, two DAgger rounds of 200 episodes (the expert acting with probability 0.5, then 0.25), 30 epochs
-#: per fit on minibatches of 512, the best round's student (100 episodes alone) kept.
+#: per fit on minibatches of 512, the best round's student (100 episodes alone) kept; the expert's first version
+#: (``expert_keep_clear=False``: the shipped ``gripper-imitated`` was imitated from it, before its moves kept clear).
 IMITATED_GRIPPER = ImitationConfig(expert_episodes=150, dagger_rounds=2, dagger_episodes=200, epochs=30, minibatch=512,
-                                   noisy_expert_episodes=250, expert_noise=0.3, beta=0.5, eval_episodes=100)  # fmt: skip
+                                   noisy_expert_episodes=250, expert_noise=0.3, beta=0.5, eval_episodes=100,
+                                   expert_keep_clear=False)  # fmt: skip
 
 
 def _shipped_skills() -> Preset:

@@ -32,7 +32,7 @@ from hrlp.atomic import writing
 from hrlp.config import TrainConfig
 from hrlp.envs.arm_env import ArmEnv
 from hrlp.envs.registry import make
-from hrlp.skills.scripted import ScriptedGrasp
+from hrlp.skills.scripted import ScriptedGrasp, ScriptedGraspConfig
 
 __all__ = ["ImitationConfig", "collect", "fit_mean", "greedy_success", "imitate"]
 
@@ -61,6 +61,9 @@ class ImitationConfig:
     beta: float = 0.0
     """In DAgger round r (1, 2, ...) the expert acts at each step with probability beta**r, else the student (0: the
     student alone, plain DAgger)."""
+    expert_keep_clear: bool = True
+    """The expert's :attr:`hrlp.skills.scripted.ScriptedGraspConfig.keep_clear` (False: the first version's motion, from
+    which the shipped ``gripper-imitated`` was imitated)."""
     eval_episodes: int = 0
     """If > 0, each round's student is evaluated greedily over this many episodes (seeds apart from the collected
     ones) and the best round's student is the one written (ties: the later round); 0: the last round's, unevaluated."""
@@ -80,6 +83,8 @@ class ImitationConfig:
             raise ValueError(f"imitation expert_noise must be a number >= 0, got {self.expert_noise!r}")
         if self.noisy_expert_episodes and not self.expert_noise:
             raise ValueError("imitation noisy_expert_episodes needs expert_noise > 0 (the noise's std)")
+        if not isinstance(self.expert_keep_clear, bool):
+            raise ValueError(f"imitation expert_keep_clear must be true or false, got {self.expert_keep_clear!r}")
         if not (math.isfinite(self.beta) and 0 <= self.beta <= 1):
             raise ValueError(f"imitation beta must be in [0, 1], got {self.beta!r}")
 
@@ -180,7 +185,7 @@ def imitate(
 def _imitate(trainer: Any, train_config: TrainConfig, run_dir: Path, cfg: ImitationConfig,
              log: Callable[[str], None]) -> dict[str, Any]:  # fmt: skip
     env = make("Gripper", episode_steps=train_config.episode_steps or 100, **train_config.task_kwargs).unwrapped
-    expert = ScriptedGrasp(env.physics)
+    expert = ScriptedGrasp(env.physics, ScriptedGraspConfig(keep_clear=cfg.expert_keep_clear))
     policy, normalizer = trainer.policy, trainer.normalizer
     generator = torch.Generator().manual_seed(train_config.seed)
 

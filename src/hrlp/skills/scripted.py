@@ -47,6 +47,11 @@ _DOWN = np.array([0.0, 0.0, -1.0])
 class ScriptedGraspConfig:
     """Constants of :class:`ScriptedGrasp` (the defaults are the measured choice)."""
 
+    keep_clear: bool = True
+    """Moves over the capsule keep the claw clear of it (the module's "Motion"; 0.935 of the Gripper's own starts).
+    False: the first version's motion, from which ``gripper-imitated`` was imitated (0.895): each joint's step clipped on
+    its own, one clearance whether or not the arm is near the plan's line, no raising of a step that dips, the fingers
+    opened while rising, no retreat, and the plan's height key on an absolute grid."""
     omega: float = 30.0
     """Bandwidth w of the computed-torque tracking, rad/s (time constant about 1/w... 2/w)."""
     open_angle: float = 0.6
@@ -214,7 +219,8 @@ class ScriptedGrasp:
         yaw = round(self._capsule_yaw() / math.pi * n_yaw) % n_yaw
         # The height relative to the resting height: a capsule lying on the table (z = its radius, a half-way point of
         # an absolute grid) would otherwise flip between two plans with the last digit of its height.
-        return (round(c[0] / g), round(c[1] / g), round((c[2] - CAPSULE_REST_Z) / gz), yaw)
+        rest = CAPSULE_REST_Z if cfg.keep_clear else 0.0
+        return (round(c[0] / g), round(c[1] / g), round((c[2] - rest) / gz), yaw)
 
     def plan(self) -> GraspPlan:
         """The plan for the current capsule pose (cached per rounded pose: a pure function of the state)."""
@@ -226,7 +232,8 @@ class ScriptedGrasp:
             return hit
         cfg = self.config
         n_yaw = max(1, round(math.pi / cfg.yaw_grid))
-        capsule = np.array([key[0] * cfg.position_grid, key[1] * cfg.position_grid, CAPSULE_REST_Z + key[2] * cfg.height_grid])
+        rest = CAPSULE_REST_Z if cfg.keep_clear else 0.0
+        capsule = np.array([key[0] * cfg.position_grid, key[1] * cfg.position_grid, rest + key[2] * cfg.height_grid])
         plan = self._make_plan(capsule, key[3] * math.pi / n_yaw)
         self.plans_made += 1
         self._cache[key] = plan
@@ -396,7 +403,12 @@ class ScriptedGrasp:
         elif aligned and rho < cfg.funnel_radius:
             phase = "descend"
         elif (
-            clearance < min(cfg.rise_below, self._needed_clearance(line, not aligned) - cfg.rise_slack)
+            clearance
+            < (
+                min(cfg.rise_below, self._needed_clearance(line, not aligned) - cfg.rise_slack)
+                if cfg.keep_clear
+                else self._needed_clearance(line)
+            )
             and rho < cfg.funnel_radius + 0.07
         ):
             phase = "rise"  # the claw is low beside the capsule: straight up first, so the move over it sweeps nothing
@@ -421,27 +433,31 @@ class ScriptedGrasp:
                 q = self.target(plan, line, 0.0, lowest=CAPSULE_REST_Z + cfg.close_lift)
             elif phase == "rise":
                 # Straight up from where the hand is, keeping the palm's orientation, so the fingers do not sweep.
-                far = float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle
+                far = cfg.keep_clear and (float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle)
                 goal = p.hand + np.array([0.0, 0.0, self._needed_clearance(line, far) + 0.015 - float(s["clearance"])])
-                away = p.hand[:2] - p.capsule[:2]
-                goal[:2] += cfg.rise_retreat * away / max(float(np.linalg.norm(away)), 1e-6)
+                if cfg.keep_clear:
+                    away = p.hand[:2] - p.capsule[:2]
+                    goal[:2] += cfg.rise_retreat * away / max(float(np.linalg.norm(away)), 1e-6)
                 self._scratch.qpos[:] = p.data.qpos
                 q, _, _ = self._ik(goal, p.data.xmat[self._claw].reshape(3, 3).copy(), p.qpos.copy(), 15)
             else:
                 f_rho = np.clip((rho - cfg.align_radius) / (cfg.funnel_radius - cfg.align_radius), 0.0, 1.0)
                 f_ang = np.clip((angle - cfg.align_angle) / (cfg.funnel_angle - cfg.align_angle), 0.0, 1.0)
-                far = float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle
+                far = cfg.keep_clear and (float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle)
                 # An arm far from the line turns into it at the top of the line, away from the capsule.
                 top = float(line.heights[-1]) if far else self.approach_height(line)
                 q = self.target(plan, line, top * float(max(f_rho, f_ang)))
             q = q.copy()
             # The whole step scaled down (not each joint clipped), so that the move keeps its direction in joint space.
             dq = q[:ARM_JOINTS] - p.qpos[:ARM_JOINTS]
-            q[:ARM_JOINTS] = p.qpos[:ARM_JOINTS] + dq * min(1.0, cfg.max_step / max(float(np.abs(dq).max()), 1e-9))
-            if phase == "over":
+            if cfg.keep_clear:
+                q[:ARM_JOINTS] = p.qpos[:ARM_JOINTS] + dq * min(1.0, cfg.max_step / max(float(np.abs(dq).max()), 1e-9))
+            else:
+                q[:ARM_JOINTS] = p.qpos[:ARM_JOINTS] + np.clip(dq, -cfg.max_step, cfg.max_step)
+            if phase == "over" and cfg.keep_clear:
                 q = self._keep_clear(q, line, far)
         # The fingers open, but while rising they stay as they are: a finger low beside the capsule would swing into it.
-        q[7:] = p.qpos[7:9] if phase == "rise" else (-cfg.open_angle, cfg.open_angle)
+        q[7:] = p.qpos[7:9] if phase == "rise" and cfg.keep_clear else (-cfg.open_angle, cfg.open_angle)
         u = self._computed_torque(q) / GEARS
         if phase in ("hold", "close"):
             u[7:] = (1.0, -1.0)
