@@ -28,7 +28,7 @@ CASES = {  # script: (arguments, a line its output must contain)
     "reliability.py": ("--only physics --blow-ups 2", "forced physics blow-ups: 24 (3 kinds x 2 steps x 4 tasks"),
     "carry_plan.py": ("--episodes 2 --initiation", "k = 15, initiation sets: success"),
     "chain_exploration.py": ("--episodes 2 --k 100 --policy mover", "policy mover, k = 100, log-std -2, initiation sets on"),
-    "scripted_grasp.py": ("--episodes 2 --steps 30 --no-bank", "episodes; capsule pushed > 3 cm in"),
+    "scripted_grasp.py": ("--episodes 2 --steps 30 --no-bank --first-version", "episodes; capsule pushed > 3 cm in"),
     "batched_step.py": ("--world-steps 40 --episode-steps 30 --repeats 1 --n 4", "fastest:"),
     "ppo_vs_trpo.py": (  # its flat path trains as test_ppo.py's PPO run does
         "--only manager --workers 1 --seeds 1 --manager-steps 32 --manager-batch 32 --episodes 1 --out cmp",
