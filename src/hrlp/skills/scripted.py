@@ -41,6 +41,8 @@ from hrlp.envs.physics import ARM_JOINTS, BASE_AXIS_XY, CAPSULE_RADIUS, CAPSULE_
 #: Motor gears of the 9 joints (ARM_CLAW facts): torque = gear * control.
 GEARS = np.array([100.0, 100.0, 100.0, 70.0, 70.0, 30.0, 30.0, 10.0, 10.0])
 _DOWN = np.array([0.0, 0.0, -1.0])
+#: Horizontal distance beyond the funnel within which the claw counts as near the capsule (rising, keeping clear), m.
+_NEAR = 0.07
 
 
 @dataclass(frozen=True)
@@ -182,7 +184,6 @@ class ScriptedGrasp:
         self._hand = m.site("hand").id
         self._object_geom = m.geom("object").id
         self._table = m.geom("table").id
-        self._tip_sites = (m.site("tip_right").id, m.site("tip_left").id)
         self._arm_geoms = sorted(physics._arm_geoms)
         self._jacp = np.zeros((3, m.nv))
         self._jacr = np.zeros((3, m.nv))
@@ -219,8 +220,11 @@ class ScriptedGrasp:
         yaw = round(self._capsule_yaw() / math.pi * n_yaw) % n_yaw
         # The height relative to the resting height: a capsule lying on the table (z = its radius, a half-way point of
         # an absolute grid) would otherwise flip between two plans with the last digit of its height.
-        rest = CAPSULE_REST_Z if cfg.keep_clear else 0.0
-        return (round(c[0] / g), round(c[1] / g), round((c[2] - rest) / gz), yaw)
+        return (round(c[0] / g), round(c[1] / g), round((c[2] - self._key_rest()) / gz), yaw)
+
+    def _key_rest(self) -> float:
+        """The height the plan key's height grid starts from (the first version's grid started at 0)."""
+        return CAPSULE_REST_Z if self.config.keep_clear else 0.0
 
     def plan(self) -> GraspPlan:
         """The plan for the current capsule pose (cached per rounded pose: a pure function of the state)."""
@@ -232,8 +236,9 @@ class ScriptedGrasp:
             return hit
         cfg = self.config
         n_yaw = max(1, round(math.pi / cfg.yaw_grid))
-        rest = CAPSULE_REST_Z if cfg.keep_clear else 0.0
-        capsule = np.array([key[0] * cfg.position_grid, key[1] * cfg.position_grid, rest + key[2] * cfg.height_grid])
+        capsule = np.array(
+            [key[0] * cfg.position_grid, key[1] * cfg.position_grid, self._key_rest() + key[2] * cfg.height_grid]
+        )
         plan = self._make_plan(capsule, key[3] * math.pi / n_yaw)
         self.plans_made += 1
         self._cache[key] = plan
@@ -409,7 +414,7 @@ class ScriptedGrasp:
                 if cfg.keep_clear
                 else self._needed_clearance(line)
             )
-            and rho < cfg.funnel_radius + 0.07
+            and rho < cfg.funnel_radius + _NEAR
         ):
             phase = "rise"  # the claw is low beside the capsule: straight up first, so the move over it sweeps nothing
         else:
@@ -427,13 +432,14 @@ class ScriptedGrasp:
             plan = self.plan()
             line = self.line(plan)
             rho, angle = float(s["rho"]), float(s["angle"])
+            # Far from the line (joints or palm beyond the funnel): the larger transit clearance and the line's top.
+            far = cfg.keep_clear and (float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle)
             if phase == "close":
                 # H at the capsule's centre, at most close_lift above where it lies on the table: a pinched capsule
                 # rises into the claw, and a hand that followed it all the way up would keep the tips from closing.
                 q = self.target(plan, line, 0.0, lowest=CAPSULE_REST_Z + cfg.close_lift)
             elif phase == "rise":
                 # Straight up from where the hand is, keeping the palm's orientation, so the fingers do not sweep.
-                far = cfg.keep_clear and (float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle)
                 goal = p.hand + np.array([0.0, 0.0, self._needed_clearance(line, far) + 0.015 - float(s["clearance"])])
                 if cfg.keep_clear:
                     away = p.hand[:2] - p.capsule[:2]
@@ -443,7 +449,6 @@ class ScriptedGrasp:
             else:
                 f_rho = np.clip((rho - cfg.align_radius) / (cfg.funnel_radius - cfg.align_radius), 0.0, 1.0)
                 f_ang = np.clip((angle - cfg.align_angle) / (cfg.funnel_angle - cfg.align_angle), 0.0, 1.0)
-                far = cfg.keep_clear and (float(s["joints"]) >= cfg.joint_tolerance or angle >= cfg.funnel_angle)
                 # An arm far from the line turns into it at the top of the line, away from the capsule.
                 top = float(line.heights[-1]) if far else self.approach_height(line)
                 q = self.target(plan, line, top * float(max(f_rho, f_ang)))
@@ -465,7 +470,7 @@ class ScriptedGrasp:
 
     def _keep_clear(self, q: np.ndarray, line: GraspLine, far: bool) -> np.ndarray:
         """``q`` [9] raised, if needed, so that the claw's lowest point (H or an open finger tip) keeps the needed
-        clearance above the capsule's top wherever H is within ``funnel_radius + 0.07`` of the capsule horizontally: a
+        clearance above the capsule's top wherever H is within ``funnel_radius + _NEAR`` of the capsule horizontally: a
         move in joint space towards a distant line may otherwise dip the claw into the capsule on the way."""
         cfg, p, m, d = self.config, self._now, self._now.model, self._scratch
         d.qpos[:] = p.data.qpos
@@ -473,9 +478,9 @@ class ScriptedGrasp:
         d.qpos[7:9] = (-cfg.open_angle, cfg.open_angle)
         mujoco.mj_kinematics(m, d)
         h, c = d.site_xpos[self._hand].copy(), p.capsule
-        if math.hypot(h[0] - c[0], h[1] - c[1]) >= cfg.funnel_radius + 0.07:
+        if math.hypot(h[0] - c[0], h[1] - c[1]) >= cfg.funnel_radius + _NEAR:
             return q
-        lowest = min(h[2], *(d.site_xpos[t][2] for t in self._tip_sites)) - c[2] - CAPSULE_RADIUS
+        lowest = min(h[2], *(d.site_xpos[t][2] for t in self._now._tips)) - c[2] - CAPSULE_RADIUS
         need = max(self._needed_clearance(line, far), 0.0) + cfg.clear_margin
         if lowest >= need:
             return q
