@@ -21,6 +21,7 @@ from hrlp.envs.batched import (
     Measurements,
     capsule_pose_rows,
     claw_closure_rows,
+    claw_pose_rows,
     dist_rows,
     hand_to_capsule_axis_rows,
     make_batched,
@@ -43,7 +44,8 @@ FIELDS = ("obs", "next_obs", "rewards", "discount", "tau", "terminated", "trunca
 def _meas(n: int = 1, **rows: list[float]) -> Measurements:
     z = np.zeros((n, 3))
     arrays = {k: np.atleast_2d(np.asarray(v, dtype=float)) for k, v in rows.items()}
-    fields = ("capsule_vel", "hand", "tip_right", "tip_left", "capsule", "capsule_axis", "forearm_axis", "target")
+    fields = ("capsule_vel", "hand", "tip_right", "tip_left", "capsule", "capsule_axis", "forearm_axis", "claw_x", "claw_y")
+    fields += ("target",)
     return Measurements(qpos=arrays.get("qpos", np.zeros((n, 9))), qvel=np.zeros((n, 9)),
                         **{f: arrays.get(f, z) for f in fields}, capsule_half_length=0.035)  # fmt: skip
 
@@ -73,6 +75,12 @@ def test_claw_closure_and_capsule_pose_known_answers():
     theta = 0.4
     m = _meas(1, capsule_axis=[math.cos(theta), math.sin(theta), 0.0])
     np.testing.assert_allclose(capsule_pose_rows(m)[0], [math.cos(2 * theta), math.sin(2 * theta), 0, 0, 0, 0], atol=1e-15)
+
+
+def test_claw_pose_known_answer():
+    m = _meas(1, hand=[1.0, 2.0, 3.0], tip_right=[1.5, 2.0, 3.0], tip_left=[0.5, 2.0, 3.0], capsule=[1.0, 1.0, 1.0],
+              claw_x=[0.0, 0.0, -1.0], claw_y=[0.0, 1.0, 0.0])  # fmt: skip
+    np.testing.assert_array_equal(claw_pose_rows(m)[0], [0, 1, 2, 0.5, 1, 2, -0.5, 1, 2, 0, 0, -1, 0, 1, 0])
 
 
 def test_info_arrays_and_action_checks():
@@ -107,7 +115,8 @@ def test_measured_model_steps_as_the_arm_model_and_its_sensors_read_what_armphys
         np.testing.assert_array_equal(d.qpos, p.data.qpos)
         np.testing.assert_array_equal(d.qvel, p.data.qvel)
         ax = p.data.geom_xmat[measured.geom("object").id].reshape(3, 3)[:, 2]
-        expected = [p.hand, *p.fingertips, p.capsule, ax, p.forearm_axis]
+        palm = p.data.xmat[measured.body("claw").id].reshape(3, 3)
+        expected = [p.hand, *p.fingertips, p.capsule, ax, p.forearm_axis, palm[:, 0], palm[:, 1]]
         np.testing.assert_array_equal(d.sensordata, np.concatenate(expected))
 
 
@@ -169,9 +178,16 @@ def test_every_other_registered_arm_task_gives_the_same_episodes_bit_for_bit(nam
     "task",
     [
         GripperTask(reward=GripReward(c4=1.0, distance="axis"), push_coeff=2.0, observe_capsule=True),
+        GripperTask(observe_capsule=True, observe_claw=True),
+        GripperTask(observe_claw=True),
         ReachAndGripTask(experiment=2, reward=GripReward(c4=0.5), curriculum_alpha=0.05),
     ],
-    ids=["gripper-axis-c4-push-observed", "reach-and-grip-curriculum-c4"],
+    ids=[
+        "gripper-axis-c4-push-observed",
+        "gripper-capsule-and-claw-observed",
+        "gripper-claw-observed",
+        "reach-and-grip-curriculum-c4",
+    ],
 )
 def test_task_options_give_the_same_episodes_bit_for_bit(task: Task):
     n, steps, episode = 2, 120, 40

@@ -340,3 +340,22 @@ def test_gripper_can_observe_the_capsules_pose():
     np.testing.assert_allclose(seen.unwrapped.physics.capsule_pose_features(np.zeros(6))[3:], [0.1, -0.2, 0.3])
     with pytest.raises(ValueError, match="observe_capsule must be true or false"):
         make("Gripper", observe_capsule="yes")
+
+
+def test_gripper_can_observe_the_claw_relative_to_the_capsule():
+    # observe_claw appends 15 numbers after the capsule's pose: H, FT1 and FT2 less C, then the palm's x and y axes.
+    env = make("Gripper", observe_capsule=True, observe_claw=True)
+    assert env.observation_space.shape == (45,) and env.unwrapped.task.observed_features == ("capsule_pose", "claw_pose")
+    obs, _ = env.reset(seed=3)
+    p = env.unwrapped.physics
+    c, (ft1, ft2) = p.capsule, p.fingertips
+    palm = p.data.xmat[p.model.body("claw").id].reshape(3, 3)
+    np.testing.assert_allclose(obs[30:], np.concatenate([p.hand - c, ft1 - c, ft2 - c, palm[:, 0], palm[:, 1]]), atol=1e-12)
+    assert np.linalg.norm(obs[30:33]) == pytest.approx(p.hand_to_capsule(), abs=1e-12)
+    assert np.linalg.norm(obs[33:36] - obs[36:39]) == pytest.approx(p.finger_gap(), abs=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(obs[39:42]), 1.0, atol=1e-12)  # unit axes, at right angles
+    assert abs(obs[39:42] @ obs[42:45]) < 1e-12
+    only_claw = make("Gripper", observe_claw=True)
+    assert only_claw.observation_space.shape == (39,) and only_claw.unwrapped.task.observed_features == ("claw_pose",)
+    with pytest.raises(ValueError, match="observe_claw must be true or false"):
+        make("Gripper", observe_claw=1)

@@ -1,9 +1,11 @@
-"""Skills that read named observation features (the capsule's pose) beyond the 24 base numbers and their parameters.
+"""Skills that read named observation features (the capsule's pose, the claw's pose relative to it) beyond the 24 base
+numbers and their parameters.
 
-A Gripper trained with ``observe_capsule`` observes 30 numbers; as a skill it is given the 24 base numbers by the
-Manager and the 6 pose numbers by the environment it acts in, computed from that environment's physics. These tests
-check that every place a skill acts gives it the same 30 numbers its training task did: alone, inside a MacroEnv, and
-over the batched backend (including the first step after a reset, where the batched worlds' sensors must be current).
+A Gripper trained with ``observe_capsule`` and ``observe_claw`` observes 45 numbers; as a skill it is given the 24 base
+numbers by the Manager and the 6 + 15 feature numbers by the environment it acts in, computed from that environment's
+physics. These tests check that every place a skill acts gives it the same 45 numbers its training task did: alone,
+inside a MacroEnv, and over the batched backend (including the first step after a reset, where the batched worlds'
+sensors must be current).
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ from hrlp.skills import SkillLibrary
 from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroSpec, MacroVectorEnv
 from hrlp.train import TrainConfig, load_policy, train
 
-SEEING = {"observe_capsule": True}
+SEEING = {"observe_capsule": True, "observe_claw": True}
+F = 6 + 15  # capsule_pose, claw_pose
 N, EPISODE, K = 3, 12, 5
 
 
@@ -34,28 +37,28 @@ def seeing(tmp_path_factory):
 def test_a_skill_records_the_features_its_task_observed_and_acts_on_them_like_the_policy(seeing):
     run, lib = seeing
     skill, manifest = lib.load("seeing"), lib.manifest("seeing")
-    assert (skill.features, skill.feature_dim, skill.obs_dim) == (("capsule_pose",), 6, 30)
-    assert (manifest["features"], manifest["obs_dim"]) == (["capsule_pose"], 30)
+    assert (skill.features, skill.feature_dim, skill.obs_dim) == (("capsule_pose", "claw_pose"), F, 24 + F)
+    assert (manifest["features"], manifest["obs_dim"]) == (["capsule_pose", "claw_pose"], 24 + F)
     env = make("Gripper", episode_steps=25, **SEEING)
     obs, _ = env.reset(seed=3)
     # The environment computes the features from its physics exactly as the task observes them.
-    np.testing.assert_array_equal(skill.features_of([env.unwrapped.physics])[0], obs[24:30])
+    np.testing.assert_array_equal(skill.features_of([env.unwrapped.physics])[0], obs[24:])
     policy, normalizer, _ = load_policy(run / "checkpoint")
     expected = np.clip(policy.act_numpy(normalizer(obs, update=False).astype(np.float32), deterministic=True), -1, 1)
-    got = skill.act(obs[None, :24], np.zeros((1, 0)), obs[None, 24:30])
+    got = skill.act(obs[None, :24], np.zeros((1, 0)), obs[None, 24:])
     np.testing.assert_allclose(got[0], expected, atol=1e-5)
-    other = obs[None, 24:30] + np.array([[-1.0, 1.0, 0.5, 0.3, -0.3, 0.2]])
+    other = obs[None, 24:] + np.linspace(-1.0, 1.0, F)[None]
     assert not np.allclose(skill.act(obs[None, :24], np.zeros((1, 0)), other), got)  # the features reach the network
 
 
 def test_a_skill_without_the_features_it_reads_is_refused_with_one_line(seeing):
     skill = seeing[1].load("seeing")
-    with pytest.raises(ValueError, match=r"skill seeing reads the observation features capsule_pose; pass them \(\[N, 6\]\)"):
+    with pytest.raises(ValueError, match=r"reads the observation features capsule_pose, claw_pose; pass them \(\[N, 21\]\)"):
         skill.act(np.zeros((2, 24)), np.zeros((2, 0)))
-    with pytest.raises(ValueError, match=r"features \(capsule_pose\) must have shape \[2, 6\], got \[2, 5\]"):
-        skill.act(np.zeros((2, 24)), np.zeros((2, 0)), np.zeros((2, 5)))
+    with pytest.raises(ValueError, match=r"features \(capsule_pose, claw_pose\) must have shape \[2, 21\], got \[2, 6\]"):
+        skill.act(np.zeros((2, 24)), np.zeros((2, 0)), np.zeros((2, 6)))
     with pytest.raises(ValueError, match="NaN or inf"):
-        skill.act(np.zeros((1, 24)), np.zeros((1, 0)), np.full((1, 6), np.nan))
+        skill.act(np.zeros((1, 24)), np.zeros((1, 0)), np.full((1, F), np.nan))
 
 
 def test_a_manager_gives_the_skill_the_features_its_task_observed(seeing):
@@ -71,7 +74,7 @@ def test_a_manager_gives_the_skill_the_features_its_task_observed(seeing):
         obs, _, term, trunc, info = manager.step((0, np.zeros(0)))
         total = 0.0
         for _ in range(info["tau"]):
-            low, r, *_ = alone.step(skill.act(low[None, :24], np.zeros((1, 0)), low[None, 24:30])[0])
+            low, r, *_ = alone.step(skill.act(low[None, :24], np.zeros((1, 0)), low[None, 24:])[0])
             total += r
         np.testing.assert_array_equal(obs, low[:24])
         assert info["task_reward"] == pytest.approx(total, rel=1e-12)

@@ -75,6 +75,8 @@ SENSORS: tuple[tuple[str, int, int, str], ...] = (
     ("hrlp_capsule", _S.mjSENS_FRAMEPOS, _O.mjOBJ_XBODY, "object"),  # C: xpos[object] (the body frame, as ArmPhysics)
     ("hrlp_capsule_axis", _S.mjSENS_FRAMEZAXIS, _O.mjOBJ_GEOM, "object"),  # column 2 of geom_xmat[object]
     ("hrlp_forearm_axis", _S.mjSENS_FRAMEXAXIS, _O.mjOBJ_XBODY, "forearm"),  # column 0 of xmat[forearm]
+    ("hrlp_claw_x", _S.mjSENS_FRAMEXAXIS, _O.mjOBJ_XBODY, "claw"),  # column 0 of xmat[claw]: the fingers' direction
+    ("hrlp_claw_y", _S.mjSENS_FRAMEYAXIS, _O.mjOBJ_XBODY, "claw"),  # column 1 of xmat[claw]: the closing direction
 )
 _FULL, _INTEGRATION = _ST.mjSTATE_FULLPHYSICS, _ST.mjSTATE_INTEGRATION
 _MOCAP = _ST.mjSTATE_MOCAP_POS | _ST.mjSTATE_MOCAP_QUAT
@@ -111,6 +113,8 @@ class Measurements:
     capsule: np.ndarray  # [N, 3] C, m
     capsule_axis: np.ndarray  # [N, 3] unit vector along the capsule
     forearm_axis: np.ndarray  # [N, 3] unit vector along the forearm
+    claw_x: np.ndarray  # [N, 3] the palm's x axis (the fingers' direction)
+    claw_y: np.ndarray  # [N, 3] the palm's y axis (the direction the fingers close along)
     target: np.ndarray  # [N, 3] T (the shadow capsule), m
     capsule_half_length: float  # half-length of the capsule's axis segment, m
 
@@ -154,10 +158,18 @@ def capsule_pose_rows(m: Measurements) -> np.ndarray:
     return np.column_stack([x * x - y * y, 2.0 * x * y, z * z, m.capsule_vel])
 
 
+def claw_pose_rows(m: Measurements) -> np.ndarray:
+    """:meth:`ArmPhysics.claw_pose_features` for ``N`` worlds: ``(H - C, FT1 - C, FT2 - C, palm x, palm y)``, ``[N, 15]``."""
+    c = m.capsule
+    return np.column_stack([m.hand - c, m.tip_right - c, m.tip_left - c, m.claw_x, m.claw_y])
+
+
 def feature_rows(name: str, m: Measurements) -> np.ndarray:
     """:meth:`ArmPhysics.feature` for ``N`` worlds: the named observation feature, ``[N, width]``."""
     if name == "capsule_pose":
         return capsule_pose_rows(m)
+    if name == "claw_pose":
+        return claw_pose_rows(m)
     raise ValueError(f"unknown observation feature {name!r} (known: {', '.join(OBS_FEATURES)})")
 
 
@@ -241,7 +253,8 @@ class _Gripper:
         return terms, held
 
     def extra_obs(self, m: Measurements, ep: EpisodeState) -> np.ndarray | None:
-        return capsule_pose_rows(m) if self.t.observe_capsule else None
+        parts = [feature_rows(name, m) for name in self.t.observed_features]
+        return np.column_stack(parts) if parts else None
 
     def track(self, m: Measurements) -> tuple[np.ndarray, ...]:
         return ()
@@ -694,6 +707,8 @@ class BatchedArmEnv:
             capsule=col("hrlp_capsule"),
             capsule_axis=col("hrlp_capsule_axis"),
             forearm_axis=col("hrlp_forearm_axis"),
+            claw_x=col("hrlp_claw_x"),
+            claw_y=col("hrlp_claw_y"),
             target=self._mocap[:, target : target + 3],
             capsule_half_length=half,
         )
@@ -814,6 +829,7 @@ __all__ = [
     "VectorisedTask",
     "capsule_pose_rows",
     "claw_closure_rows",
+    "claw_pose_rows",
     "dist_rows",
     "feature_rows",
     "grip_terms_rows",

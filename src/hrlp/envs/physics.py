@@ -39,8 +39,8 @@ BASE_OBS_DIM = 2 * N_JOINTS + 3 + 3
 #: Named observation features beyond the 24 base numbers, by name: their width. A task may append them to its
 #: observation (``GripperTask.observe_capsule``) and a skill trained on it reads them wherever it acts, computed from
 #: the physics by :meth:`ArmPhysics.feature` (one world) or :func:`hrlp.envs.batched.feature_rows` (N worlds).
-#: ``capsule_pose``: :meth:`ArmPhysics.capsule_pose_features`.
-OBS_FEATURES: dict[str, int] = {"capsule_pose": 6}
+#: ``capsule_pose``: :meth:`ArmPhysics.capsule_pose_features`; ``claw_pose``: :meth:`ArmPhysics.claw_pose_features`.
+OBS_FEATURES: dict[str, int] = {"capsule_pose": 6, "claw_pose": 15}
 #: The arm's base axis is the vertical line through the shoulder; start circles are centred on it.
 BASE_AXIS_XY = np.array([-0.15, 0.0])
 #: Height of the capsule's centre when it lies on the table (its radius).
@@ -122,6 +122,7 @@ class ArmPhysics:
         self._tips = (m.site("tip_right").id, m.site("tip_left").id)
         self._obj_body = m.body("object").id
         self._forearm_body = m.body("forearm").id
+        self._claw_body = m.body("claw").id
         self._table = m.geom("table").id
         self._object_geom = m.geom("object").id
         self._arm_geoms = frozenset(
@@ -140,6 +141,7 @@ class ArmPhysics:
         self._capsule_v = d.xpos[self._obj_body]
         self._capsule_axis_v = d.geom_xmat[self._object_geom]  # row-major 3 x 3: the axis is entries 2, 5, 8
         self._capsule_half_length = float(m.geom_size[self._object_geom, 1])
+        self._claw_axes_v = d.xmat[self._claw_body]  # row-major 3 x 3: the palm's x axis is entries 0, 3, 6, y 1, 4, 7
         self._target_v = d.mocap_pos[self._target_mocap]
         mujoco.mj_forward(m, self.data)
 
@@ -179,12 +181,35 @@ class ArmPhysics:
         out[3:6] = self.data.qvel[N_JOINTS : N_JOINTS + 3]  # the free joint's linear velocity, world frame
         return out
 
+    def claw_pose_features(self, out: np.ndarray) -> np.ndarray:
+        """Write 15 numbers into ``out[:15]``: H - C, FT1 - C and FT2 - C (metres), then the palm's x axis (the fingers'
+        direction) and y axis (the direction they close along), world frame.
+
+        The 24 base numbers hold H and C, but a normaliser scales each coordinate by its spread over the workspace (tens
+        of centimetres), so the millimetres between the claw and the capsule that a grip depends on are lost in it; the
+        finger tips and the palm's orientation are functions of the joint angles that a small network learns poorly.
+        A Gripper imitating the scripted grasp fits it with a third less error given these numbers (docs/skills.md)."""
+        c, ax = self._capsule_v, self._claw_axes_v
+        out[0:3] = self._hand_v - c
+        out[3:6] = self._tip_v[0] - c
+        out[6:9] = self._tip_v[1] - c
+        out[9:12] = ax[0::3]
+        out[12:15] = ax[1::3]
+        return out
+
+    def write_feature(self, name: str, out: np.ndarray) -> np.ndarray:
+        """Write the named observation feature (:data:`OBS_FEATURES`) of the current state into ``out[:width]``;
+        ValueError for an unknown name."""
+        if name == "capsule_pose":
+            return self.capsule_pose_features(out)
+        if name == "claw_pose":
+            return self.claw_pose_features(out)
+        raise ValueError(f"unknown observation feature {name!r} (known: {', '.join(OBS_FEATURES)})")
+
     def feature(self, name: str) -> np.ndarray:
         """The named observation feature (:data:`OBS_FEATURES`) of the current state, ``[width]``; ValueError for an
         unknown name."""
-        if name == "capsule_pose":
-            return self.capsule_pose_features(np.empty(OBS_FEATURES[name]))
-        raise ValueError(f"unknown observation feature {name!r} (known: {', '.join(OBS_FEATURES)})")
+        return self.write_feature(name, np.empty(OBS_FEATURES.get(name, 0)))
 
     @property
     def target(self) -> np.ndarray:

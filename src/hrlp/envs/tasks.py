@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hrlp.envs.physics import BASE_AXIS_XY, CAPSULE_REST_Z, N_JOINTS, ArmPhysics
+from hrlp.envs.physics import BASE_AXIS_XY, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
 
 #: Radius (metres) of the circle around the base axis on which capsules and palms start.
 #: Sampling 200k random arm poses puts the hand within 2 cm of the table at every angle for radii
@@ -460,26 +460,32 @@ class GripperTask(Task):
     observe_capsule: bool = False
     """Append the capsule's pose to the observation (:meth:`ArmPhysics.capsule_pose_features`: its axis and velocity,
     6 numbers) for a Gripper that sees how a pushed capsule lies (False: the paper's 24 numbers, as the shipped skills)."""
+    observe_claw: bool = False
+    """Append the claw's pose relative to the capsule after that (:meth:`ArmPhysics.claw_pose_features`: H, FT1 and FT2
+    less C, the palm's x and y axes, 15 numbers): what a grip depends on at the scale of millimetres (False: not)."""
     start_capsule: np.ndarray = field(default_factory=lambda: np.zeros(3), init=False, compare=False, repr=False)
     """Where the capsule lay at the episode's start (episode state). [3]"""
 
     @property
     def extra_obs_dim(self) -> int:  # type: ignore[override]
-        """6 with :attr:`observe_capsule`, else 0."""
-        return 6 if self.observe_capsule else 0
+        """The widths of :attr:`observed_features` (6 with :attr:`observe_capsule`, 15 more with :attr:`observe_claw`)."""
+        return sum(OBS_FEATURES[f] for f in self.observed_features)
 
     @property
     def observed_features(self) -> tuple[str, ...]:  # type: ignore[override]
-        """``("capsule_pose",)`` with :attr:`observe_capsule`, else none."""
-        return ("capsule_pose",) if self.observe_capsule else ()
+        """``capsule_pose`` with :attr:`observe_capsule`, then ``claw_pose`` with :attr:`observe_claw`."""
+        return ("capsule_pose",) * self.observe_capsule + ("claw_pose",) * self.observe_claw
 
     def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
-        if self.observe_capsule:
-            physics.capsule_pose_features(out)
+        at = 0
+        for name in self.observed_features:
+            physics.write_feature(name, out[at:])
+            at += OBS_FEATURES[name]
 
     def __post_init__(self) -> None:
-        if not isinstance(self.observe_capsule, bool):
-            raise ValueError(f"GripperTask.observe_capsule must be true or false, got {self.observe_capsule!r}")
+        for flag in ("observe_capsule", "observe_claw"):
+            if not isinstance(getattr(self, flag), bool):
+                raise ValueError(f"GripperTask.{flag} must be true or false, got {getattr(self, flag)!r}")
         _nonneg(self, "angle_range", "push_coeff")
         for name, top in (("start_distance", 0.3), ("finger_opening", 1.05)):
             v = tuple(getattr(self, name))
