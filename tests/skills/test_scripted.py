@@ -84,7 +84,7 @@ def test_imitation_writes_a_run_that_eval_reads_and_trpo_fine_tunes(tmp_path):
     cfg = TrainConfig(task="Gripper", steps=200, batch_steps=100, num_envs=2, episode_steps=20, init_log_std=-1.0,
                       task_kwargs={**GRIPPER_START, "c3": -8, "c4": 10})  # fmt: skip
     summary = imitate(cfg, tmp_path / "run", ImitationConfig(expert_episodes=2, dagger_rounds=1, dagger_episodes=1,
-                                                             epochs=30), log=lambda line: None)  # fmt: skip
+                                                             epochs=30, lr_decay=True), log=lambda line: None)  # fmt: skip
     first, last = summary["rounds"]
     assert first["acting"] == "expert" and first["states"] == 40 and last["states"] == 60  # 20 steps per episode
     assert first["fit_mse"] < 0.1  # the student's mean follows the expert's torques on the states it saw
@@ -99,6 +99,8 @@ def test_imitation_writes_a_run_that_eval_reads_and_trpo_fine_tunes(tmp_path):
         imitate(dataclasses.replace(cfg, task="Reacher", task_kwargs={}), tmp_path / "other")
     with pytest.raises(ValueError, match="epochs"):
         ImitationConfig(epochs=0)
+    with pytest.raises(ValueError, match="lr_decay must be true or false"):
+        ImitationConfig(lr_decay=1)  # type: ignore[arg-type]
 
 
 def _gripper_env(steps: int = 15):

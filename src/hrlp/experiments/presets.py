@@ -232,6 +232,13 @@ IMITATED_GRIPPER = ImitationConfig(expert_episodes=150, dagger_rounds=2, dagger_
                                    noisy_expert_episodes=250, expert_noise=0.3, beta=0.5, eval_episodes=100,
                                    expert_keep_clear=False)  # fmt: skip
 
+#: The imitation of the Gripper that sees its claw relative to the capsule (``gripper-claw``, docs/skills.md): 300 expert
+#: episodes and 300 with DART noise of std 0.3, four DAgger rounds of 200 episodes in which the student acts alone, 40
+#: epochs per fit on minibatches of 512 with the learning rate annealed to 0, the best round's student (100 episodes
+#: alone) kept; the expert whose moves keep clear.
+CLAW_GRIPPER = ImitationConfig(expert_episodes=300, noisy_expert_episodes=300, expert_noise=0.3, dagger_rounds=4,
+                               dagger_episodes=200, epochs=40, minibatch=512, lr_decay=True, eval_episodes=100)  # fmt: skip
+
 
 def _shipped_skills() -> Preset:
     """The recipes of the skills shipped in ``src/hrlp/skills/pretrained/`` (``hrlp skills build`` trains them and adds
@@ -265,6 +272,13 @@ def _shipped_skills() -> Preset:
             Run("gripper-imitated", replace(gripper, hidden=(256, 256), init_log_std=-2.0, backend="batched",
                                             task_kwargs={**gripper.task_kwargs, "observe_capsule": True}),
                 steps=8_000_000, skill=("gripper-imitated", 15), imitation=IMITATED_GRIPPER),
+            # The same task seeing the claw's pose relative to the capsule too (claw_pose: H, FT1, FT2 less C, the palm's
+            # axes), imitated with CLAW_GRIPPER, then TRPO with the fast defaults of 3 Dec 2026 in one process.
+            Run("gripper-claw", TrainConfig(task="Gripper", workers=1, backend="batched", batch_steps=25_000,
+                                            episode_steps=100, hidden=(256, 256), init_log_std=-2.0,
+                                            task_kwargs={**gripper.task_kwargs, "observe_capsule": True,
+                                                         "observe_claw": True}),
+                steps=8_000_000, skill=("gripper-claw", 15), imitation=CLAW_GRIPPER),
             # MoverNoised's recipe from the held starts (the capsule in gripper-imitated's claw): a Mover that carries what
             # the Gripper gripped, one process on the batched backend.
             Run("mover-held", replace(_flat("MoverNoised", 25_000, episode_steps=100, init_log_std=-1.0), workers=1,

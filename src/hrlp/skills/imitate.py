@@ -53,6 +53,8 @@ class ImitationConfig:
     """States per Adam step."""
     lr: float = 1e-3
     """Adam's learning rate."""
+    lr_decay: bool = False
+    """Anneal the learning rate of each fit from ``lr`` to 0 on a cosine over its steps (False: constant)."""
     noisy_expert_episodes: int = 0
     """More round-0 episodes, in which the expert's executed actions carry Gaussian noise of std ``expert_noise`` (its
     labels stay clean; DART): they show how the expert recovers from states off its own path."""
@@ -83,8 +85,9 @@ class ImitationConfig:
             raise ValueError(f"imitation expert_noise must be a number >= 0, got {self.expert_noise!r}")
         if self.noisy_expert_episodes and not self.expert_noise:
             raise ValueError("imitation noisy_expert_episodes needs expert_noise > 0 (the noise's std)")
-        if not isinstance(self.expert_keep_clear, bool):
-            raise ValueError(f"imitation expert_keep_clear must be true or false, got {self.expert_keep_clear!r}")
+        for flag in ("expert_keep_clear", "lr_decay"):
+            if not isinstance(getattr(self, flag), bool):
+                raise ValueError(f"imitation {flag} must be true or false, got {getattr(self, flag)!r}")
         if not (math.isfinite(self.beta) and 0 <= self.beta <= 1):
             raise ValueError(f"imitation beta must be in [0, 1], got {self.beta!r}")
 
@@ -145,16 +148,21 @@ def greedy_success(env: ArmEnv, student: Callable[[np.ndarray], np.ndarray], epi
 
 def fit_mean(policy: Any, obs: torch.Tensor, actions: torch.Tensor, cfg: ImitationConfig, generator: torch.Generator) -> float:
     """Fit ``policy``'s mean action on normalised ``obs [M, D]`` to ``actions [M, A]`` by mean squared error (Adam,
-    ``cfg.epochs`` shuffled passes); returns the final mean squared error over all the data."""
+    ``cfg.epochs`` shuffled passes, the learning rate annealed to 0 with ``cfg.lr_decay``); returns the final mean
+    squared error over all the data."""
     params = list(policy.mean_net.parameters())
     opt = torch.optim.Adam(params, lr=cfg.lr)
     n = obs.shape[0]
+    steps = cfg.epochs * -(-n // cfg.minibatch)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, steps) if cfg.lr_decay else None
     for _ in range(cfg.epochs):
         for idx in torch.randperm(n, generator=generator).split(cfg.minibatch):
             loss = ((policy.mean_net(obs[idx]) - actions[idx]) ** 2).mean()
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
+            if schedule is not None:
+                schedule.step()
     with torch.no_grad():
         return float(((policy.mean_net(obs) - actions) ** 2).mean())
 
