@@ -73,7 +73,8 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     assert all(r.config.macro is None or r.config.macro.handover is None
                for p in PRESETS.values() if "handover" not in p.name
                and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated", "reach-and-grip-1-imitated",
-                                 "reach-and-move-imitated", "reach-and-move-chained") for r in p.runs)  # fmt: skip
+                                 "reach-and-grip-1-claw", "reach-and-grip-2-claw", "reach-and-move-imitated",
+                                 "reach-and-move-chained") for r in p.runs)  # fmt: skip
     # The imitated grid is the reacher-handover grid and the tuned gripper + micro cells with gripper-imitated in place
     # of the gripper, and nothing else.
     reacher_handover = {r.name: r.config for r in PRESETS["reach-and-grip-2-reacher-handover"].runs}
@@ -85,6 +86,25 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
         assert r.config.macro.skills == tuple(s.replace("gripper", "gripper-imitated") for s in base.macro.skills), r.name
         assert replace(r.config, macro=replace(r.config.macro, skills=base.macro.skills)) == base, r.name
         assert r.paper == fig7[plain.replace("reacher-handover", "reacher")], r.name
+    # The claw grids are the imitated grids with gripper-claw in place of gripper-imitated, and Figure 7's also has
+    # gripper + s-reacher as reach-and-grip-2-handover runs it, with gripper-claw.
+    handover_2 = {r.name: r for r in PRESETS["reach-and-grip-2-handover"].runs}
+    for claw, base_runs in (
+        ("reach-and-grip-1-claw", PRESETS["reach-and-grip-1-imitated"].runs),
+        ("reach-and-grip-2-claw", imitated),
+    ):
+        base = {r.name: r for r in base_runs}
+        runs = PRESETS[claw].runs
+        assert len(runs) == len(base) + (4 if "-2-" in claw else 0), claw
+        for r in runs:
+            other = (
+                base.get(r.name.replace("gripper-claw", "gripper-imitated"))
+                or handover_2[r.name.replace("gripper-claw", "gripper")]
+            )
+            assert r.config.macro.skills == tuple(s.replace(other.config.macro.skills[0], "gripper-claw", 1) if i == 0 else s
+                                                  for i, s in enumerate(other.config.macro.skills)), r.name  # fmt: skip
+            assert replace(r.config, macro=replace(r.config.macro, skills=other.config.macro.skills)) == other.config, r.name
+            assert r.paper == other.paper, r.name
     # reach-and-move with the imitated skills: reach (capsule-relative goals, the Reacher's own claw), grip, carry (the
     # Mover's target a world point), with the headline's Manager settings; TargetDistSum beside the paper's best pair.
     carry, carry_10 = PRESETS["reach-and-move-imitated"].runs

@@ -125,6 +125,43 @@ def _relative_only(config: TrainConfig, reacher: str) -> TrainConfig:
     return replace(config, macro=replace(config.macro, handover=Handover(approach_height=0.0, open_torque=0.0)))
 
 
+def _figure_6_with(gripper: str) -> tuple[Run, ...]:
+    """Figure 6's grid (Experiment 1, k = 10) over ``gripper`` + reacher-handover, capsule-relative goals, both skills
+    run as trained, the headline's Manager settings."""
+    return tuple(
+        Run(
+            f"{gripper}+reacher-handover,c2={c2},tr={tr}",
+            _swap(_relative_only(_tuned(_experiment_1(c2, tr)), "reacher-handover"), "gripper", gripper),
+            _FIG6[(c2, tr)],
+        )
+        for c2, tr in _GRID
+    )
+
+
+def _figure_7_with(gripper: str, s_reacher: bool = False) -> tuple[Run, ...]:
+    """Figure 7's grid (Experiment 2, k = 15) with ``gripper`` in place of the paper's Gripper and reacher-handover (goals
+    capsule-relative, run as trained) in place of its Reacher, the headline's Manager settings; with ``s_reacher``, also
+    gripper + s-reacher, the paper's Stabilised Reacher driven for hand-over (:func:`_handover`)."""
+    labels = ("gripper+reacher", "gripper+reacher+micro", "gripper+micro") + (("gripper+s-reacher",) if s_reacher else ())
+
+    def config(label: str) -> TrainConfig:
+        manager = _tuned_manager(*_FIG7_SKILLS[label])
+        if label == "gripper+s-reacher":
+            return _handover(manager)
+        return manager if label == "gripper+micro" else _relative_only(manager, "reacher-handover")
+
+    return tuple(
+        Run(
+            f"{label.replace('gripper', gripper).replace('+reacher', '+reacher-handover')},c2={c2},tr={tr}",
+            _swap(replace(config(label), task_kwargs={"c2": c2, "tr": tr}), "gripper", gripper),
+            paper,
+        )
+        for label, cells in _FIG7.items()
+        if label in labels
+        for (c2, tr), paper in cells.items()
+    )
+
+
 def _target_relative(config: TrainConfig) -> TrainConfig:
     """A hand-over Manager's config whose Mover targets are offsets from the task's target T (``Handover.target_relative``)."""
     assert config.macro is not None and config.macro.handover is not None
@@ -433,14 +470,15 @@ PRESETS: dict[str, Preset] = {
             "(gripper-imitated) and the Reacher trained for hand-over (reacher-handover, capsule-relative goals only); the "
             "headline's Manager settings; paper: its figure with its own gripper + reacher",
             "Section 4.3.1, Figure 6",
-            tuple(
-                Run(
-                    f"gripper-imitated+reacher-handover,c2={c2},tr={tr}",
-                    _swap(_relative_only(_tuned(_experiment_1(c2, tr)), "reacher-handover"), "gripper", "gripper-imitated"),
-                    _FIG6[(c2, tr)],
-                )
-                for c2, tr in _GRID
-            ),
+            _figure_6_with("gripper-imitated"),
+            budget=2_000_000,
+        ),
+        Preset(
+            "reach-and-grip-1-claw",
+            "Figure 6's grid (Experiment 1, k = 10, c2 x tr) as reach-and-grip-1-imitated with the Gripper that also sees "
+            "its claw's pose (gripper-claw) in place of gripper-imitated; paper: its figure with its own gripper + reacher",
+            "Section 4.3.1, Figure 6",
+            _figure_6_with("gripper-claw"),
             budget=2_000_000,
         ),
         Preset(
@@ -499,25 +537,17 @@ PRESETS: dict[str, Preset] = {
             "and with the micro-action as in the headline; the headline's Manager settings; paper: its figure for the same "
             "set with its own skills",
             "Section 4.3.1, Figure 7",
-            tuple(
-                Run(
-                    f"{label.replace('gripper', 'gripper-imitated').replace('reacher', 'reacher-handover')},c2={c2},tr={tr}",
-                    _swap(
-                        replace(
-                            _tuned_manager(*_FIG7_SKILLS[label])
-                            if label == "gripper+micro"
-                            else _relative_only(_tuned_manager(*_FIG7_SKILLS[label]), "reacher-handover"),
-                            task_kwargs={"c2": c2, "tr": tr},
-                        ),
-                        "gripper",
-                        "gripper-imitated",
-                    ),
-                    paper,
-                )
-                for label, cells in _FIG7.items()
-                if label in ("gripper+reacher", "gripper+reacher+micro", "gripper+micro")
-                for (c2, tr), paper in cells.items()
-            ),
+            _figure_7_with("gripper-imitated"),
+            budget=3_000_000,
+        ),
+        Preset(
+            "reach-and-grip-2-claw",
+            "Figure 7's grid (Experiment 2, k = 15) as reach-and-grip-2-imitated with the Gripper that also sees its "
+            "claw's pose (gripper-claw) in place of gripper-imitated, and gripper + s-reacher with the paper's Stabilised "
+            "Reacher driven for hand-over (as in reach-and-grip-2-handover); paper: its figure for the same set with its "
+            "own skills",
+            "Section 4.3.1, Figure 7",
+            _figure_7_with("gripper-claw", s_reacher=True),
             budget=3_000_000,
         ),
         Preset(
