@@ -6,9 +6,9 @@ in one call, then computes every world's observation (the paper's 24 numbers and
 success test and tracked values with NumPy over worlds; only resets (one per episode) run per world, through the
 task's own ``reset`` on a scratch :class:`~hrlp.envs.physics.ArmPhysics`.
 
-Backends (``backend=``), both on one ``MjModel`` of the arm with 18 position sensors added (hand H, finger tips
-FT1/FT2, capsule C, the capsule's and the forearm's axes), so that a world's measurements come out of MuJoCo as one
-``sensordata`` row instead of six reads:
+Backends (``backend=``), both on one ``MjModel`` of the arm with eight 3-number sensors added (hand H, finger tips
+FT1/FT2, capsule C, the capsule's and the forearm's axes, the claw's x and y axes), so that a world's measurements come
+out of MuJoCo as one ``sensordata`` row instead of eight reads:
 
 - ``"rollout"`` (the default): MuJoCo's ``mujoco.rollout`` module steps every world ``substeps`` physics steps in C
   in one call, on ``threads`` threads (1: the calling thread). ``rollout`` starts each call from the worlds'
