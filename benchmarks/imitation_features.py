@@ -76,10 +76,7 @@ def main() -> None:
         norm = RunningNormalizer(width)
         norm.update(obs[fit, :width])
 
-        def tensor(x: np.ndarray) -> torch.Tensor:
-            return torch.as_tensor(norm.normalize(x[:, :width]), dtype=torch.float32)
-
-        xf, xv = tensor(obs[fit]), tensor(obs[val])
+        xf, xv = (torch.as_tensor(norm.normalize(obs[rows, :width]), dtype=torch.float32) for rows in (fit, val))
         yf, yv = torch.as_tensor(act[fit], dtype=torch.float32), torch.as_tensor(act[val], dtype=torch.float32)
         fit_mse = fit_mean(policy, xf, yf, icfg, torch.Generator().manual_seed(a.seed))
         with torch.no_grad():
