@@ -1,6 +1,7 @@
 """A Gripper skill from the states where a trained Manager hands over to it, beside its own and the paper's starts.
 
-Collects ``--states`` hand-over states of the Manager run ``MANAGER`` to its Gripper (``--gripper``; the Manager samples
+Collects ``--states`` hand-over states of the Manager run ``MANAGER`` to its Gripper (``--gripper``, default the Manager's
+one skill named ``gripper*``; the Manager samples
 its actions, as in training: :func:`hrlp.skills.dagger.collect_handover_states`) into three start banks under ``--out``:
 
 - ``all``: every hand-over;
@@ -36,6 +37,7 @@ from hrlp.experiments.presets import GRIPPER_START
 from hrlp.skills import Skill, load_skill
 from hrlp.skills.dagger import collect_handover_states
 from hrlp.skills.starts import write_start_bank
+from hrlp.train import TrainConfig
 
 PAPER_STARTS = {"start_distance": [0.05, 0.09], "finger_opening": [0.0, 0.0]}
 
@@ -80,7 +82,7 @@ def banks(manager: Path, gripper: Skill, states: int, out: Path) -> dict[str, Pa
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("manager", type=Path, help="a trained Manager's run directory")
-    ap.add_argument("--gripper", default="gripper-imitated", help="the Manager's Gripper skill")
+    ap.add_argument("--gripper", default=None, help="the Manager's Gripper skill (default: its one skill named gripper*)")
     ap.add_argument("--skills", default=None, help="comma-separated Gripper skills to evaluate (default: --gripper)")
     ap.add_argument("--library", default=None, help="where the skills of --skills are looked up first")
     ap.add_argument("--states", type=int, default=300)
@@ -92,6 +94,12 @@ def main() -> None:
         ap.error(f"{args.manager}: no Manager run there (no checkpoint)")
     if (args.out / "results.json").exists():
         ap.error(f"{args.out / 'results.json'} exists; choose another --out")
+    if args.gripper is None:
+        config = TrainConfig.from_json(json.loads((args.manager / "config.json").read_text()))
+        grippers = [s for s in (config.macro.skills if config.macro else ()) if s.startswith("gripper")]
+        if len(grippers) != 1:
+            ap.error(f"{args.manager}: the Manager's Gripper is not one skill named gripper* ({grippers}); give --gripper")
+        args.gripper = grippers[0]
     args.out.mkdir(parents=True, exist_ok=True)
     skills = [load_skill(name, args.library) for name in (args.skills or args.gripper).split(",")]
     sets = {"own": dict(GRIPPER_START), "paper": PAPER_STARTS}
