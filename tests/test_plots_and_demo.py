@@ -4,7 +4,7 @@ import pytest
 from typer.testing import CliRunner
 
 from hrlp.cli import app
-from hrlp.plots import plot_learning_curves, read_progress
+from hrlp.plots import LEGEND_INSIDE_MAX, learning_curves_figure, plot_learning_curves, read_progress
 from hrlp.train import TrainConfig, train
 
 
@@ -22,6 +22,26 @@ def test_learning_curves_of_several_seeds(tmp_path):
         plot_learning_curves({"Reacher": runs}, tmp_path / "curve.txt")
     with pytest.raises(ValueError, match=r"no progress\.csv"):
         read_progress(tmp_path / "nowhere")
+
+
+def test_many_learning_curves_get_one_legend_below_the_axes(tmp_path):
+    import matplotlib.pyplot as plt
+
+    run = tmp_path / "s0"
+    list(train(TrainConfig(task="Reacher", steps=200, batch_steps=100, num_envs=2, episode_steps=20), run))
+    few = learning_curves_figure({f"cell {i}": [run] for i in range(LEGEND_INSIDE_MAX)})
+    assert all(ax.get_legend() is not None for ax in few.axes) and not few.legends
+    many = learning_curves_figure({f"a long run label, cell {i}": [run] for i in range(16)})
+    assert all(ax.get_legend() is None for ax in many.axes) and len(many.legends) == 1
+    renderer = many.canvas.get_renderer()
+    legend = many.legends[0].get_window_extent(renderer)
+    for ax in many.axes:  # the legend lies wholly below every axes (their tick labels included), so it hides no curve
+        assert legend.y1 < ax.get_tightbbox(renderer).y0
+    assert legend.y0 >= 0  # and inside the figure, not cut off at its bottom edge
+    assert len(many.legends[0].get_texts()) == 16
+    assert len({tuple(line.get_color()) for line in many.axes[0].get_lines()}) == 16  # 16 colours for 16 lines
+    plt.close(few)
+    plt.close(many)
 
 
 def test_demo_trains_evaluates_and_writes_video_and_plot(tmp_path):

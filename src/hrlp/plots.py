@@ -15,6 +15,9 @@ from hrlp.atomic import atomic_path
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+#: Learning curves with more lines than this get one legend below the axes instead of one inside each.
+LEGEND_INSIDE_MAX = 4
+
 
 def read_progress(run_dir: Path) -> dict[str, np.ndarray]:
     """A run's ``progress.csv`` as columns of floats (NaN where empty). Raises ValueError if it is missing or empty."""
@@ -39,31 +42,51 @@ def plot_learning_curves(
     ``runs`` maps a label (e.g. "Manager" or "flat") to the run directories of its seeds. The figure is written
     atomically to ``out`` (.png, .pdf or .svg); returns ``out``.
     """
+    _check_suffix(out)
+    return _save(learning_curves_figure(runs, metrics, title), out)
+
+
+def learning_curves_figure(
+    runs: Mapping[str, Sequence[Path]],
+    metrics: Sequence[str] = ("success_rate", "return_mean"),
+    title: str | None = None,
+) -> Figure:
+    """The figure of :func:`plot_learning_curves`, not yet written (close it with ``matplotlib.pyplot.close``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import EngFormatter
 
-    _check_suffix(out)
     data = {label: [read_progress(r) for r in dirs] for label, dirs in runs.items()}
-    fig, axes = plt.subplots(1, len(metrics), figsize=(5 * len(metrics), 3.6), squeeze=False)
+    # Past a few lines a legend inside the axes hides the curves: one legend for the figure goes below them instead.
+    below = len(data) > LEGEND_INSIDE_MAX
+    ncol = 2 if len(data) > 8 else 1
+    legend_h = 0.2 * math.ceil(len(data) / ncol) + 0.2 if below else 0.0
+    fig, axes = plt.subplots(1, len(metrics), figsize=(5 * len(metrics), 3.6 + legend_h), squeeze=False)
+    colors = plt.get_cmap("tab20" if len(data) > 10 else "tab10").colors  # no two lines share a colour up to 20
     for ax, metric in zip(axes[0], metrics, strict=True):
-        for label, logs in data.items():
+        for i, (label, logs) in enumerate(data.items()):
             logs = [lg for lg in logs if metric in lg]
             if not logs:
                 continue
             grid = np.linspace(0, min(lg["env_steps"][-1] for lg in logs), 100)
             ys = np.stack([np.interp(grid, lg["env_steps"], _fill(lg[metric])) for lg in logs])
-            (line,) = ax.plot(grid, ys.mean(0), label=f"{label} ({len(logs)} run{'s' * (len(logs) > 1)})")
+            label = f"{label} ({len(logs)} run{'s' * (len(logs) > 1)})"
+            (line,) = ax.plot(grid, ys.mean(0), color=colors[i % len(colors)], label=label)
             if len(logs) > 1:
                 ax.fill_between(grid, ys.min(0), ys.max(0), color=line.get_color(), alpha=0.2)
         ax.xaxis.set_major_formatter(EngFormatter())
-        _label_axes(ax, "environment steps", metric.replace("_", " "))
+        _label_axes(ax, "environment steps", metric.replace("_", " "), legend=not below)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    return _save(fig, out)
+    if below:
+        handles, labels = axes[0][0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+        fig.tight_layout(rect=(0, legend_h / fig.get_figheight(), 1, 1))
+    else:
+        fig.tight_layout()
+    return fig
 
 
 def plot_sweep(
@@ -106,12 +129,13 @@ def plot_sweep(
     return _save(fig, out)
 
 
-def _label_axes(ax: Any, xlabel: str, ylabel: str) -> None:
+def _label_axes(ax: Any, xlabel: str, ylabel: str, legend: bool = True) -> None:
     """Axis labels, a light grid and a small legend: the style every hrlp plot shares."""
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    if legend:
+        ax.legend(fontsize=8)
 
 
 def _spacing(xs: Sequence[float]) -> float:
