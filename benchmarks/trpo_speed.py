@@ -16,8 +16,8 @@ with ``--workers`` sampling processes; "fast", which adds Fisher-vector products
 on every 4th time step of the batch; and "defaults", ``TrainConfig``'s defaults with no option at all (what ``hrlp
 train Pusher-v5`` runs: a worker per core, its 50,000-step batch unless ``--defaults-batch-steps``). On the arm task
 the defaults step each worker's environments as one batched MuJoCo backend (``--backend batched``); "defaults, serial
-backend" is the same run with one environment object each (the defaults before the batched backend; the paper's,
-fast and fastest runs are serial too, as PAPER_SETTINGS is).
+backend" is the same run with one environment object each (the defaults before the batched backend; the paper's, fast
+and fastest runs are serial too, as PAPER_SETTINGS is), and "defaults, one worker" the same run in one process.
 ``benchmarks/trpo_returns.py --hrlp fastest`` (and ``--hrlp defaults``) checks that they still learn as well.
 
 Goals: hrlp's defaults >= 10x sb3-contrib and >= 5x Tianshou in env steps/s; on the arm task >= 75% of the cores'
@@ -281,8 +281,10 @@ def main() -> None:
     if "arm" not in skip:
         aphys = arm_physics(args.physics_steps)
         serial_name = "hrlp defaults, serial backend (--backend serial)"
+        one_name = "hrlp defaults, one worker (--workers 1)"
         arm_runs = ((paper_name, paper), (fast_name, fast), (fastest_name, fastest),
-                    (serial_name, {**defaults, "backend": "serial"}), (defaults_name, defaults))  # fmt: skip
+                    (serial_name, {**defaults, "backend": "serial"}), (defaults_name, defaults),
+                    (one_name, {**defaults, "workers": 1}))  # fmt: skip
         for name, kw in arm_runs:
             if name in with_workers and args.workers < 2:
                 continue
