@@ -8,17 +8,21 @@ Prints, for the skill (default: the shipped ``gripper``; a skill that reads obse
   d(H, C) there against d(H, capsule axis) (``GripReward(distance="axis")``);
 - the reward per step the paper's terms pay in gripped, lifted states (capsule centre above 3 cm) under
   ``distance="centre"`` and ``"axis"``;
-- success by the start distance d(H, C);
+- success by the start distance d(H, C), and by the start clearance: how close the arm's nearest geom (a finger, the
+  palm, the forearm) comes to the capsule at the start (``mj_geomDistance``);
 - the failed episodes by kind: capsule pushed more than 3 cm across the table, hand never within 5 cm, claw closed
   beside the capsule.
 
     python benchmarks/gripper_diagnosis.py --episodes 100
+
+Episode ``i`` is seeded ``--first-seed + i`` (``benchmarks/gripper_handover.py`` starts its own starts at 10,000).
 """
 
 from __future__ import annotations
 
 import argparse
 
+import mujoco
 import numpy as np
 
 from hrlp.envs.arm_env import ArmEnv
@@ -33,18 +37,23 @@ def main() -> None:
     ap.add_argument("--library", default=None)
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--first-seed", type=int, default=0, help="seed of the first episode (the next ones count up)")
     args = ap.parse_args()
     skill = load_skill(args.skill, args.library)
     env = ArmEnv(GripperTask(**GRIPPER_START), episode_steps=args.steps)
     p = env.physics
     m, d = p.model, p.data
     claw = m.body("claw").id
+    capsule = m.geom("object").id
+    arm_geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] not in (0, m.geom_bodyid[capsule], m.body("target").id)]
+    nearest = np.zeros(6)
     centre, axis = GripReward(), GripReward(distance="axis")
     held_c, held_d, held_axis, lifted = [], [], [], []
     episodes = []
     for ep in range(args.episodes):
-        obs, _ = env.reset(seed=ep)
+        obs, _ = env.reset(seed=args.first_seed + ep)
         c0, d0 = p.capsule.copy(), p.hand_to_capsule()
+        clear0 = min(mujoco.mj_geomDistance(m, d, g, capsule, 0.1, nearest) for g in arm_geoms)
         first, min_d = -1, np.inf
         info: dict = {}
         for t in range(args.steps):
@@ -63,7 +72,7 @@ def main() -> None:
             if trunc:
                 break
         pushed = float(np.hypot(*(p.capsule[:2] - c0[:2])))
-        episodes.append((bool(info["success"]), first, pushed, min_d, d0))
+        episodes.append((bool(info["success"]), first, pushed, min_d, d0, clear0))
     ok = np.array([e[0] for e in episodes])
     firsts = np.array([e[1] for e in episodes if e[0]])
     print(
@@ -91,6 +100,11 @@ def main() -> None:
     print("success by start distance d(H, C): " + ", ".join(
         f"{lo * 100:.0f}-{min(hi, 0.09) * 100:.0f} cm {ok[(starts >= lo) & (starts < hi)].mean():.2f} "
         f"({((starts >= lo) & (starts < hi)).sum()})" for lo, hi in bins))  # fmt: skip
+    clear = np.array([e[5] for e in episodes])
+    edges = (("under 3 mm", -1.0, 0.003), ("3-10 mm", 0.003, 0.01), ("10-20 mm", 0.01, 0.02), ("20 mm or more", 0.02, 1.0))
+    print("success by start clearance (the arm's nearest point to the capsule): " + ", ".join(
+        f"{name} {ok[(clear >= lo) & (clear < hi)].mean():.2f} ({((clear >= lo) & (clear < hi)).sum()})"
+        for name, lo, hi in edges if ((clear >= lo) & (clear < hi)).any()))  # fmt: skip
     fails = [e for e in episodes if not e[0]]
     if fails:
         n = len(fails)

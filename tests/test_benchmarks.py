@@ -10,7 +10,7 @@ import pytest
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 CASES = {  # script: (arguments, a line its output must contain)
-    "gripper_diagnosis.py": ("--skill gripper-imitated --episodes 2 --steps 30", "failed episodes"),
+    "gripper_diagnosis.py": ("--skill gripper-imitated --episodes 2 --steps 30", "success by start clearance (the arm's"),
     "backend_returns.py": ("--steps 32 --batch-steps 32 --num-envs 4 --seeds 1 --episodes 1", "batched: return"),
     "eval_speed.py": ("--episodes 3 --steps 40 --batch-steps 40 --num-envs 4", "same results: True"),
     "env_step.py": ("--steps 200 --repeats 1 --tasks Reacher,Gripper", "median env/physics time ratio"),
