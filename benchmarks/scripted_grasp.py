@@ -9,10 +9,12 @@ percentile of the step of first success, the finger gap at first success (under 
 capsule is between the tips), and the failures by kind. For the bank, the same split by what the start state allows:
 capsule within reach (centre at most 0.36 m from the arm's base axis) and at rest (slower than 0.1 m/s), or not.
 
-``--first-version`` runs the controller's first version (``ScriptedGraspConfig(keep_clear=False)``).
+``--first-version`` runs the controller's first version (``ScriptedGraspConfig(keep_clear=False)``);
+``--escape-clearance M`` turns on its escape from tight starts (``ScriptedGraspConfig.escape_clearance``). Success is
+also split by the start clearance, the nearest any arm geom comes to the capsule at the start.
 
     python benchmarks/scripted_grasp.py --episodes 100 [--bank PATH | --no-bank] [--steps 100] [--first-version] \
-        [--out FILE.json]
+        [--escape-clearance 0.01] [--out FILE.json]
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ def run_episodes(
             "d0": p.hand_to_capsule(),
             "reach0": math.hypot(c0[0] - BASE_AXIS_XY[0], c0[1] - BASE_AXIS_XY[1]),
             "speed0": math.hypot(v0[0], v0[1]),
+            "clear0": expert.arm_clearance(),
             "first": -1,
         }
         phases = []
@@ -101,6 +104,14 @@ def summary(name: str, recs: list[dict[str, Any]]) -> dict[str, Any]:
         }
         res["failures"] = kinds
         print(f"  failures {len(fails)}: " + ", ".join(f"{k} {v}" for k, v in kinds.items()))
+    by_clearance = {}
+    for name, lo, hi in (("under 1 cm", -1.0, 0.01), ("1 cm or more", 0.01, 1.0)):
+        part = [r for r in recs if lo <= r["clear0"] < hi]
+        if part:
+            by_clearance[name] = {"episodes": len(part), "success": sum(r["success"] for r in part) / len(part)}
+    res["by_start_clearance"] = by_clearance
+    print("  success by start clearance: " + ", ".join(f"{k} {v['success']:.2f} ({v['episodes']})"
+                                                        for k, v in by_clearance.items()))  # fmt: skip
     return res
 
 
@@ -112,9 +123,11 @@ def main() -> None:
     ap.add_argument("--bank", default=str(DEFAULT_BANK) if DEFAULT_BANK.exists() else None)
     ap.add_argument("--no-bank", action="store_true")
     ap.add_argument("--first-version", action="store_true", help="the controller's first version (keep_clear=False)")
+    ap.add_argument("--escape-clearance", type=float, default=0.0,
+                    help="ScriptedGraspConfig.escape_clearance, metres (0: off, the default expert)")  # fmt: skip
     ap.add_argument("--out", default=None, help="write the figures as JSON here")
     args = ap.parse_args()
-    config = ScriptedGraspConfig(keep_clear=not args.first_version)
+    config = ScriptedGraspConfig(keep_clear=not args.first_version, escape_clearance=args.escape_clearance)
     report: dict[str, Any] = {}
     t0 = time.perf_counter()
     report["own"] = summary("own starts (GRIPPER_START)", run_episodes(None, args.episodes, args.steps, args.seed, config))

@@ -66,6 +66,9 @@ class ImitationConfig:
     expert_keep_clear: bool = True
     """The expert's :attr:`hrlp.skills.scripted.ScriptedGraspConfig.keep_clear` (False: the first version's motion, from
     which the shipped ``gripper-imitated`` was imitated)."""
+    expert_escape_clearance: float = 0.0
+    """The expert's :attr:`hrlp.skills.scripted.ScriptedGraspConfig.escape_clearance`, metres (0: no escape from tight
+    starts, the expert the shipped ``gripper-claw`` was imitated from)."""
     eval_episodes: int = 0
     """If > 0, each round's student is evaluated greedily over this many episodes (seeds apart from the collected
     ones) and the best round's student is the one written (ties: the later round); 0: the last round's, unevaluated."""
@@ -81,6 +84,16 @@ class ImitationConfig:
                 raise ValueError(f"imitation {name} must be an integer >= 0, got {v!r}")
         if not (math.isfinite(self.lr) and self.lr > 0):
             raise ValueError(f"imitation lr must be a positive number, got {self.lr!r}")
+        if not (
+            isinstance(self.expert_escape_clearance, int | float)
+            and not isinstance(self.expert_escape_clearance, bool)
+            and math.isfinite(self.expert_escape_clearance)
+            and 0 <= self.expert_escape_clearance <= 0.05
+        ):
+            raise ValueError(
+                f"imitation expert_escape_clearance must be a distance in [0, 0.05] metres, got "
+                f"{self.expert_escape_clearance!r}"
+            )
         if not (math.isfinite(self.expert_noise) and self.expert_noise >= 0):
             raise ValueError(f"imitation expert_noise must be a number >= 0, got {self.expert_noise!r}")
         if self.noisy_expert_episodes and not self.expert_noise:
@@ -193,7 +206,9 @@ def imitate(
 def _imitate(trainer: Any, train_config: TrainConfig, run_dir: Path, cfg: ImitationConfig,
              log: Callable[[str], None]) -> dict[str, Any]:  # fmt: skip
     env = make("Gripper", episode_steps=train_config.episode_steps or 100, **train_config.task_kwargs).unwrapped
-    expert = ScriptedGrasp(env.physics, ScriptedGraspConfig(keep_clear=cfg.expert_keep_clear))
+    expert = ScriptedGrasp(
+        env.physics, ScriptedGraspConfig(keep_clear=cfg.expert_keep_clear, escape_clearance=cfg.expert_escape_clearance)
+    )
     policy, normalizer = trainer.policy, trainer.normalizer
     generator = torch.Generator().manual_seed(train_config.seed)
 
