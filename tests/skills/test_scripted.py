@@ -1,5 +1,6 @@
 """The scripted grasp expert: it grips from close starts, and its action is a function of the state alone."""
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -207,3 +208,54 @@ def test_the_first_version_stays_reachable_and_is_what_gripper_imitated_was_imit
     assert ImitationConfig().expert_keep_clear is True
     with pytest.raises(ValueError, match="expert_keep_clear"):
         ImitationConfig(expert_keep_clear="yes")  # type: ignore[arg-type]
+
+
+# Starts 10,042 and 10,085 (gripper_handover.py's own-start seeds) put a finger within a centimetre of the capsule:
+# the default expert's first moves push the capsule away; with the escape the hand goes up first and then grips.
+@pytest.mark.parametrize("seed", [10_042, 10_085])
+def test_the_escape_takes_the_claw_out_of_a_tight_start_and_grips(seed):
+    from hrlp.skills.scripted import ScriptedGraspConfig
+
+    def episode(cfg: ScriptedGraspConfig) -> tuple[bool, float, float]:
+        env = _env()
+        expert = ScriptedGrasp(env.physics, cfg)
+        env.reset(seed=seed)
+        clearance, c0 = expert.arm_clearance(), env.physics.capsule.copy()
+        won = False
+        for _ in range(100):
+            _, _, _, trunc, info = env.step(expert.act())
+            won |= bool(info["success"])
+            if won or trunc:
+                break
+        return won, clearance, float(np.hypot(*(env.physics.capsule[:2] - c0[:2])))
+
+    won, clearance, pushed = episode(ScriptedGraspConfig())
+    assert clearance < 0.01 and not won and pushed > 0.03
+    won, _, pushed = episode(ScriptedGraspConfig(escape_clearance=0.01))
+    assert won and pushed < 0.03
+
+
+def test_arm_clearance_is_the_nearest_arm_geom_distance():
+    env = _env()
+    expert = ScriptedGrasp(env.physics)
+    env.reset(seed=10_042)
+    p = env.physics
+    m, d = p.model, p.data
+    want = min(mujoco.mj_geomDistance(m, d, g, m.geom("object").id, 0.05, None) for g in range(1, 12))
+    assert expert.arm_clearance() == pytest.approx(want)
+    # Far from the capsule (the arm at its zero pose) the distance is capped at 5 cm.
+    d.qpos[:9] = 0
+    mujoco.mj_forward(m, d)
+    assert expert.arm_clearance() == pytest.approx(0.05)
+
+
+def test_imitation_escape_clearance_is_validated_and_off_in_the_shipped_recipes():
+    from hrlp.experiments.presets import CLAW_GRIPPER, IMITATED_GRIPPER
+    from hrlp.skills.imitate import ImitationConfig
+    from hrlp.skills.scripted import ScriptedGraspConfig
+
+    assert ScriptedGraspConfig().escape_clearance == 0.0
+    assert CLAW_GRIPPER.expert_escape_clearance == 0.0 and IMITATED_GRIPPER.expert_escape_clearance == 0.0
+    for bad in (-0.01, float("nan"), 0.5, True, "0.01"):
+        with pytest.raises(ValueError, match="expert_escape_clearance"):
+            ImitationConfig(expert_escape_clearance=bad)  # type: ignore[arg-type]
