@@ -36,7 +36,10 @@ def main() -> None:
     changes = {k: v for k, v in {"expert_episodes": args.expert_episodes, "noisy_expert_episodes": args.noisy_expert_episodes,
                                  "dagger_rounds": args.dagger_rounds, "eval_episodes": args.eval_episodes}.items()
                if v is not None}  # fmt: skip
-    imitation = dataclasses.replace(run.imitation, expert_escape_clearance=args.escape_clearance, **changes)
+    try:
+        imitation = dataclasses.replace(run.imitation, expert_escape_clearance=args.escape_clearance, **changes)
+    except ValueError as e:
+        ap.error(str(e))
     run = dataclasses.replace(run, name="gripper-claw-escape", skill=("gripper-claw-escape", 15), imitation=imitation,
                               steps=args.steps or run.steps)  # fmt: skip
     preset = dataclasses.replace(shipped, name="claw-escape", runs=(run,))

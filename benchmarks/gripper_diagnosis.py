@@ -9,7 +9,7 @@ Prints, for the skill (default: the shipped ``gripper``; a skill that reads obse
 - the reward per step the paper's terms pay in gripped, lifted states (capsule centre above 3 cm) under
   ``distance="centre"`` and ``"axis"``;
 - success by the start distance d(H, C), and by the start clearance: how close the arm's nearest geom (a finger, the
-  palm, the forearm) comes to the capsule at the start (``mj_geomDistance``);
+  palm, the forearm) comes to the capsule at the start (``ArmPhysics.arm_clearance``);
 - the failed episodes by kind: capsule pushed more than 3 cm across the table, hand never within 5 cm, claw closed
   beside the capsule.
 
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 
-import mujoco
 import numpy as np
 
 from hrlp.envs.arm_env import ArmEnv
@@ -44,16 +43,13 @@ def main() -> None:
     p = env.physics
     m, d = p.model, p.data
     claw = m.body("claw").id
-    capsule = m.geom("object").id
-    arm_geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] not in (0, m.geom_bodyid[capsule], m.body("target").id)]
-    nearest = np.zeros(6)
     centre, axis = GripReward(), GripReward(distance="axis")
     held_c, held_d, held_axis, lifted = [], [], [], []
     episodes = []
     for ep in range(args.episodes):
         obs, _ = env.reset(seed=args.first_seed + ep)
         c0, d0 = p.capsule.copy(), p.hand_to_capsule()
-        clear0 = min(mujoco.mj_geomDistance(m, d, g, capsule, 0.1, nearest) for g in arm_geoms)
+        clear0 = p.arm_clearance()
         first, min_d = -1, np.inf
         info: dict = {}
         for t in range(args.steps):

@@ -127,7 +127,10 @@ def main() -> None:
                     help="ScriptedGraspConfig.escape_clearance, metres (0: off, the default expert)")  # fmt: skip
     ap.add_argument("--out", default=None, help="write the figures as JSON here")
     args = ap.parse_args()
-    config = ScriptedGraspConfig(keep_clear=not args.first_version, escape_clearance=args.escape_clearance)
+    try:
+        config = ScriptedGraspConfig(keep_clear=not args.first_version, escape_clearance=args.escape_clearance)
+    except ValueError as e:
+        ap.error(str(e))
     report: dict[str, Any] = {}
     t0 = time.perf_counter()
     report["own"] = summary("own starts (GRIPPER_START)", run_episodes(None, args.episodes, args.steps, args.seed, config))

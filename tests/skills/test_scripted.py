@@ -259,3 +259,6 @@ def test_imitation_escape_clearance_is_validated_and_off_in_the_shipped_recipes(
     for bad in (-0.01, float("nan"), 0.5, True, "0.01"):
         with pytest.raises(ValueError, match="expert_escape_clearance"):
             ImitationConfig(expert_escape_clearance=bad)  # type: ignore[arg-type]
+    for name, bad in (("escape_clearance", -0.01), ("escape_step", float("inf")), ("escape_opening", 2.0)):
+        with pytest.raises(ValueError, match=f"ScriptedGraspConfig.{name}"):
+            ScriptedGraspConfig(**{name: bad})

@@ -128,6 +128,7 @@ class ArmPhysics:
         self._arm_geoms = frozenset(
             g for g in range(m.ngeom) if g not in (self._table, self._object_geom, m.geom("target").id)
         )
+        self._nearest_points = np.zeros(6)  # mj_geomDistance's output (arm_clearance)
         self._renderer: mujoco.Renderer | None = None
         # MuJoCo's instability warning counters, as views into MjData (read after every step, see step()).
         w, kinds = self.data.warning, mujoco.mjtWarning
@@ -308,6 +309,12 @@ class ArmPhysics:
             if c.dist < 0 and (c.geom1 in self._arm_geoms or c.geom2 in self._arm_geoms):
                 n += 1
         return n
+
+    def arm_clearance(self, distmax: float = 0.05) -> float:
+        """The smallest distance between an arm geom (a link, the palm, a finger) and the capsule, metres, after
+        ``forward`` (``mj_geomDistance``; negative while they overlap; ``distmax`` when every geom is farther)."""
+        m, d, cap = self.model, self.data, self._object_geom
+        return min(mujoco.mj_geomDistance(m, d, g, cap, distmax, self._nearest_points) for g in self._arm_geoms)
 
     # --- stepping -----------------------------------------------------------------------------
     def step(self, ctrl: np.ndarray) -> bool:

@@ -84,16 +84,10 @@ class ImitationConfig:
                 raise ValueError(f"imitation {name} must be an integer >= 0, got {v!r}")
         if not (math.isfinite(self.lr) and self.lr > 0):
             raise ValueError(f"imitation lr must be a positive number, got {self.lr!r}")
-        if not (
-            isinstance(self.expert_escape_clearance, int | float)
-            and not isinstance(self.expert_escape_clearance, bool)
-            and math.isfinite(self.expert_escape_clearance)
-            and 0 <= self.expert_escape_clearance <= 0.05
-        ):
-            raise ValueError(
-                f"imitation expert_escape_clearance must be a distance in [0, 0.05] metres, got "
-                f"{self.expert_escape_clearance!r}"
-            )
+        try:  # the expert's own check of the value
+            ScriptedGraspConfig(escape_clearance=self.expert_escape_clearance)
+        except ValueError as e:
+            raise ValueError(f"imitation expert_escape_clearance: {e}") from None
         if not (math.isfinite(self.expert_noise) and self.expert_noise >= 0):
             raise ValueError(f"imitation expert_noise must be a number >= 0, got {self.expert_noise!r}")
         if self.noisy_expert_episodes and not self.expert_noise:
