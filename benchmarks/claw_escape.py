@@ -7,7 +7,12 @@ then TRPO, then the run's greedy evaluation, written to ``--out/claw-escape/grip
 an interrupted build resumes). Freeze it with ``hrlp skills add RUN --name gripper-claw-escape --library LIB`` and
 evaluate it with ``benchmarks/gripper_diagnosis.py`` and ``benchmarks/gripper_handover.py``.
 
+With ``--observe-clearance`` the student (and so the skill) also sees each arm body's distance to the capsule
+(``GripperTask.observe_clearance``, 5 numbers: what the expert's escape decides on), and the run is named
+``gripper-claw-clearance``.
+
     python benchmarks/claw_escape.py --out runs/claw-escape
+    python benchmarks/claw_escape.py --out runs/claw-escape --observe-clearance
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("runs/claw-escape"))
     ap.add_argument("--escape-clearance", type=float, default=0.01, help="the expert's escape clearance, metres")
+    ap.add_argument("--observe-clearance", action="store_true", help="the skill also sees the arm's distances to the capsule")
     ap.add_argument("--steps", type=int, default=None, help="TRPO environment steps (default: the recipe's)")
     ap.add_argument("--expert-episodes", type=int, default=None, help="(default: the recipe's; smaller for a quick check)")
     ap.add_argument("--noisy-expert-episodes", type=int, default=None)
@@ -40,13 +46,17 @@ def main() -> None:
         imitation = dataclasses.replace(run.imitation, expert_escape_clearance=args.escape_clearance, **changes)
     except ValueError as e:
         ap.error(str(e))
-    run = dataclasses.replace(run, name="gripper-claw-escape", skill=("gripper-claw-escape", 15), imitation=imitation,
+    name = "gripper-claw-clearance" if args.observe_clearance else "gripper-claw-escape"
+    config = run.config
+    if args.observe_clearance:
+        config = dataclasses.replace(config, task_kwargs={**config.task_kwargs, "observe_clearance": True})
+    run = dataclasses.replace(run, name=name, skill=(name, 15), imitation=imitation, config=config,
                               steps=args.steps or run.steps)  # fmt: skip
     preset = dataclasses.replace(shipped, name="claw-escape", runs=(run,))
     (job,) = plan(preset, args.out, seeds=(0,))
     result = run_job(job, reuse=False)
     s = result["success"]
-    print(f"gripper-claw-escape: {result['env_steps']:,} TRPO steps, greedy success {s['mean']:.2f} [{s['low']:.2f}, "
+    print(f"{name}: {result['env_steps']:,} TRPO steps, greedy success {s['mean']:.2f} [{s['low']:.2f}, "
           f"{s['high']:.2f}] over {result['episodes']} episodes; run in {job.run_dir}")  # fmt: skip
 
 

@@ -40,7 +40,7 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -48,7 +48,17 @@ import mujoco
 import mujoco.rollout
 import numpy as np
 
-from hrlp.envs.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics, PhysicsConfig, model_xml
+from hrlp.envs.physics import (
+    BASE_OBS_DIM,
+    CAPSULE_REST_Z,
+    CLEARANCE_BODIES,
+    CLEARANCE_CUTOFF,
+    N_JOINTS,
+    OBS_FEATURES,
+    ArmPhysics,
+    PhysicsConfig,
+    model_xml,
+)
 from hrlp.envs.registry import TASKS, ArmEnvFactory
 from hrlp.envs.tasks import (
     GripperTask,
@@ -78,19 +88,27 @@ SENSORS: tuple[tuple[str, int, int, str], ...] = (
     ("hrlp_claw_x", _S.mjSENS_FRAMEXAXIS, _O.mjOBJ_XBODY, "claw"),  # column 0 of xmat[claw]: the fingers' direction
     ("hrlp_claw_y", _S.mjSENS_FRAMEYAXIS, _O.mjOBJ_XBODY, "claw"),  # column 1 of xmat[claw]: the closing direction
 )
+#: Distance sensors added for the ``arm_clearance`` feature only (they cost about a tenth of a physics step): for each
+#: body of :data:`~hrlp.envs.physics.CLEARANCE_BODIES`, the smallest distance of its geoms to the capsule, cut off at
+#: :data:`~hrlp.envs.physics.CLEARANCE_CUTOFF` (one number each; what :meth:`ArmPhysics.arm_clearance_features` computes).
+CLEARANCE_SENSORS: tuple[tuple[str, str], ...] = tuple((f"hrlp_clearance_{b}", b) for b in CLEARANCE_BODIES)
 _FULL, _INTEGRATION = _ST.mjSTATE_FULLPHYSICS, _ST.mjSTATE_INTEGRATION
 _MOCAP = _ST.mjSTATE_MOCAP_POS | _ST.mjSTATE_MOCAP_QUAT
 _BAD = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQACC)
 
 
-def measured_model(config: PhysicsConfig) -> mujoco.MjModel:
-    """The arm's model (as :func:`hrlp.envs.physics.load_model` builds it) with :data:`SENSORS` added.
+def measured_model(config: PhysicsConfig, clearance: bool = False) -> mujoco.MjModel:
+    """The arm's model (as :func:`hrlp.envs.physics.load_model` builds it) with :data:`SENSORS` added, and with
+    ``clearance`` the :data:`CLEARANCE_SENSORS` too.
 
     Position sensors change nothing in the dynamics: stepping it gives the same bits as the plain model
     (``tests/envs/test_batched.py`` checks it)."""
     spec = mujoco.MjSpec.from_string(model_xml())
     for name, sensor, objtype, obj in SENSORS:
         spec.add_sensor(name=name, type=sensor, objtype=objtype, objname=obj)
+    for name, body in CLEARANCE_SENSORS if clearance else ():
+        spec.add_sensor(name=name, type=_S.mjSENS_GEOMDIST, objtype=_O.mjOBJ_BODY, objname=body, reftype=_O.mjOBJ_GEOM,
+                        refname="object", cutoff=CLEARANCE_CUTOFF)  # fmt: skip
     model = spec.compile()
     model.opt.timestep = config.timestep  # the two settings load_model applies
     model.opt.gravity[:] = (0.0, 0.0, -9.81) if config.gravity else (0.0, 0.0, 0.0)
@@ -117,6 +135,7 @@ class Measurements:
     claw_y: np.ndarray  # [N, 3] the palm's y axis (the direction the fingers close along)
     target: np.ndarray  # [N, 3] T (the shadow capsule), m
     capsule_half_length: float  # half-length of the capsule's axis segment, m
+    clearance: np.ndarray | None = None  # [N, 5] each CLEARANCE_BODIES body's distance to the capsule, m (if measured)
 
 
 def dist_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -170,6 +189,11 @@ def feature_rows(name: str, m: Measurements) -> np.ndarray:
         return capsule_pose_rows(m)
     if name == "claw_pose":
         return claw_pose_rows(m)
+    if name == "arm_clearance":
+        if m.clearance is None:
+            raise ValueError("the arm_clearance feature needs the worlds' distance sensors: build them with "
+                             "features=('arm_clearance',)")  # fmt: skip
+        return m.clearance
     raise ValueError(f"unknown observation feature {name!r} (known: {', '.join(OBS_FEATURES)})")
 
 
@@ -482,6 +506,8 @@ class BatchedArmEnv:
             gamma: the discount per step (``VectorStep.discount``).
             backend: ``"rollout"`` (MuJoCo's rollout module) or ``"loop"`` (``mj_step`` per world from Python).
             threads: threads of the rollout backend (1: the calling thread); the loop backend takes 1 only.
+            features: named observation features (:data:`~hrlp.envs.physics.OBS_FEATURES`) that :meth:`features` must
+                give beyond the task's own (those the skills acting in these worlds read).
 
         World ``i`` behaves as an ArmEnv of the same task reset with ``seed + i`` and stepped with row ``i`` of the
         actions, reset on truncation (bit for bit with ``backend="loop"``). ``infos`` carries ``reward_<term>``,
@@ -502,6 +528,7 @@ class BatchedArmEnv:
         gamma: float = 0.99,
         backend: str = DEFAULT_BACKEND,
         threads: int = 1,
+        features: Sequence[str] = (),
     ) -> None:
         who = f"BatchedArmEnv({getattr(task, 'name', type(task).__name__)})"
         n = check_num_envs(n, who)
@@ -522,7 +549,11 @@ class BatchedArmEnv:
         self.threads = threads
         self._scratch = ArmPhysics(physics or PhysicsConfig())  # resets run here, through the task's own code
         config = self._scratch.config
-        self.model = model = measured_model(config)
+        if unknown := [f for f in features if f not in OBS_FEATURES]:
+            raise ValueError(f"{who}: unknown observation feature(s) {', '.join(map(repr, unknown))} (known: "
+                             f"{', '.join(OBS_FEATURES)})")  # fmt: skip
+        clearance = "arm_clearance" in (*self.task.observed_features, *features)
+        self.model = model = measured_model(config, clearance)
         nint = mujoco.mj_stateSize(model, _INTEGRATION)
         if nint != mujoco.mj_stateSize(self._scratch.model, _INTEGRATION):  # pragma: no cover - sensors hold no state
             raise AssertionError("the measured model's integration state differs from the arm's")
@@ -693,6 +724,10 @@ class BatchedArmEnv:
         adr = {name: int(m.sensor(name).adr[0]) for name, *_ in SENSORS}
         target = 3 * int(m.body_mocapid[m.body("target").id])
         half = float(m.geom_size[m.geom("object").id, 1])
+        clearance = None
+        if m.nsensordata > 3 * len(SENSORS):  # the clearance sensors, one number each, added last in order: a view
+            first = int(m.sensor(CLEARANCE_SENSORS[0][0]).adr[0])
+            clearance = sens[:, first : first + len(CLEARANCE_SENSORS)]
 
         def col(name: str) -> np.ndarray:
             return sens[:, adr[name] : adr[name] + 3]
@@ -711,6 +746,7 @@ class BatchedArmEnv:
             claw_y=col("hrlp_claw_y"),
             target=self._mocap[:, target : target + 3],
             capsule_half_length=half,
+            clearance=clearance,
         )
         return lambda: views  # the buffers are written in place, so the views stay current
 
@@ -796,10 +832,10 @@ class BatchedArmEnv:
 def make_batched(name: str, n: int, **kwargs: Any) -> BatchedArmEnv:
     """:class:`BatchedArmEnv` of the registered task ``name`` (``hrlp.envs.TASKS``), as ``hrlp.envs.make`` builds
     an ArmEnv: keyword arguments go to the environment (``episode_steps``, ``physics``, ``gamma``, ``backend``,
-    ``threads``) or, the rest, to the task. A one-line ValueError for an unknown task or argument."""
+    ``threads``, ``features``) or, the rest, to the task. A one-line ValueError for an unknown task or argument."""
     if name not in TASKS:
         raise ValueError(f"unknown task {name!r}; known tasks: {', '.join(TASKS)}")
-    env_keys = ("episode_steps", "physics", "gamma", "backend", "threads")
+    env_keys = ("episode_steps", "physics", "gamma", "backend", "threads", "features")
     env_kw = {k: kwargs.pop(k) for k in env_keys if k in kwargs}
     valid = TASKS[name].arguments
     if unknown := [k for k in kwargs if valid and k not in valid]:

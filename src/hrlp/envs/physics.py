@@ -39,8 +39,13 @@ BASE_OBS_DIM = 2 * N_JOINTS + 3 + 3
 #: Named observation features beyond the 24 base numbers, by name: their width. A task may append them to its
 #: observation (``GripperTask.observe_capsule``) and a skill trained on it reads them wherever it acts, computed from
 #: the physics by :meth:`ArmPhysics.feature` (one world) or :func:`hrlp.envs.batched.feature_rows` (N worlds).
-#: ``capsule_pose``: :meth:`ArmPhysics.capsule_pose_features`; ``claw_pose``: :meth:`ArmPhysics.claw_pose_features`.
-OBS_FEATURES: dict[str, int] = {"capsule_pose": 6, "claw_pose": 15}
+#: ``capsule_pose``: :meth:`ArmPhysics.capsule_pose_features`; ``claw_pose``: :meth:`ArmPhysics.claw_pose_features`;
+#: ``arm_clearance``: :meth:`ArmPhysics.arm_clearance_features`.
+OBS_FEATURES: dict[str, int] = {"capsule_pose": 6, "claw_pose": 15, "arm_clearance": 5}
+#: The arm's bodies whose geoms can touch the capsule, in the order of the ``arm_clearance`` feature.
+CLEARANCE_BODIES = ("upperarm", "forearm", "claw", "rightclaw", "leftclaw")
+#: The ``arm_clearance`` feature reads this distance (metres) for any body farther from the capsule.
+CLEARANCE_CUTOFF = 0.05
 #: The arm's base axis is the vertical line through the shoulder; start circles are centred on it.
 BASE_AXIS_XY = np.array([-0.15, 0.0])
 #: Height of the capsule's centre when it lies on the table (its radius).
@@ -129,6 +134,11 @@ class ArmPhysics:
             g for g in range(m.ngeom) if g not in (self._table, self._object_geom, m.geom("target").id)
         )
         self._nearest_points = np.zeros(6)  # mj_geomDistance's output (arm_clearance)
+        by_body = {b: tuple(sorted(g for g in self._arm_geoms if m.body(int(m.geom_bodyid[g])).name == b))
+                   for b in CLEARANCE_BODIES}  # fmt: skip
+        if sum(map(len, by_body.values())) != len(self._arm_geoms) or not all(by_body.values()):  # pragma: no cover
+            raise AssertionError("CLEARANCE_BODIES must hold every arm geom")
+        self._clearance_geoms = tuple(by_body.values())
         self._renderer: mujoco.Renderer | None = None
         # MuJoCo's instability warning counters, as views into MjData (read after every step, see step()).
         w, kinds = self.data.warning, mujoco.mjtWarning
@@ -198,6 +208,20 @@ class ArmPhysics:
         out[12:15] = ax[1::3]
         return out
 
+    def arm_clearance_features(self, out: np.ndarray) -> np.ndarray:
+        """Write 5 numbers into ``out[:5]``: for each body of :data:`CLEARANCE_BODIES` (upper arm, forearm, palm, right
+        and left finger), the smallest distance between its geoms and the capsule, metres (``mj_geomDistance``; negative
+        while they overlap; :data:`CLEARANCE_CUTOFF` when farther), with the geoms where MuJoCo last placed them (the
+        start of the last substep, as the other measurements).
+
+        A start with the forearm or a finger within millimetres of the capsule is where a move of the claw pushes it
+        away; the joint angles determine these distances, but through a function a small network learns poorly. The
+        batched backend reads the same numbers from distance sensors (:data:`hrlp.envs.batched.CLEARANCE_SENSORS`)."""
+        m, d, cap, pts = self.model, self.data, self._object_geom, self._nearest_points
+        for i, geoms in enumerate(self._clearance_geoms):
+            out[i] = min(mujoco.mj_geomDistance(m, d, g, cap, CLEARANCE_CUTOFF, pts) for g in geoms)
+        return out
+
     def write_feature(self, name: str, out: np.ndarray) -> np.ndarray:
         """Write the named observation feature (:data:`OBS_FEATURES`) of the current state into ``out[:width]``;
         ValueError for an unknown name."""
@@ -205,6 +229,8 @@ class ArmPhysics:
             return self.capsule_pose_features(out)
         if name == "claw_pose":
             return self.claw_pose_features(out)
+        if name == "arm_clearance":
+            return self.arm_clearance_features(out)
         raise ValueError(f"unknown observation feature {name!r} (known: {', '.join(OBS_FEATURES)})")
 
     def feature(self, name: str) -> np.ndarray:

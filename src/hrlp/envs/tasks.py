@@ -463,18 +463,28 @@ class GripperTask(Task):
     observe_claw: bool = False
     """Append the claw's pose relative to the capsule after that (:meth:`ArmPhysics.claw_pose_features`: H, FT1 and FT2
     less C, the palm's x and y axes, 15 numbers): what a grip depends on at the scale of millimetres (False: not)."""
+    observe_clearance: bool = False
+    """Append each arm body's distance to the capsule after that (:meth:`ArmPhysics.arm_clearance_features`: upper arm,
+    forearm, palm, the two fingers, 5 numbers, cut off at 5 cm): how close a start is to pushing the capsule away
+    (False: not)."""
     start_capsule: np.ndarray = field(default_factory=lambda: np.zeros(3), init=False, compare=False, repr=False)
     """Where the capsule lay at the episode's start (episode state). [3]"""
 
     @property
     def extra_obs_dim(self) -> int:  # type: ignore[override]
-        """The widths of :attr:`observed_features` (6 with :attr:`observe_capsule`, 15 more with :attr:`observe_claw`)."""
+        """The widths of :attr:`observed_features` (6 with :attr:`observe_capsule`, 15 more with :attr:`observe_claw`, 5
+        more with :attr:`observe_clearance`)."""
         return sum(OBS_FEATURES[f] for f in self.observed_features)
 
     @property
     def observed_features(self) -> tuple[str, ...]:  # type: ignore[override]
-        """``capsule_pose`` with :attr:`observe_capsule`, then ``claw_pose`` with :attr:`observe_claw`."""
-        return ("capsule_pose",) * self.observe_capsule + ("claw_pose",) * self.observe_claw
+        """``capsule_pose`` with :attr:`observe_capsule`, then ``claw_pose`` with :attr:`observe_claw`, then
+        ``arm_clearance`` with :attr:`observe_clearance`."""
+        return (
+            ("capsule_pose",) * self.observe_capsule
+            + ("claw_pose",) * self.observe_claw
+            + ("arm_clearance",) * self.observe_clearance
+        )
 
     def extra_observation(self, physics: ArmPhysics, out: np.ndarray) -> None:
         at = 0
@@ -483,7 +493,7 @@ class GripperTask(Task):
             at += OBS_FEATURES[name]
 
     def __post_init__(self) -> None:
-        for flag in ("observe_capsule", "observe_claw"):
+        for flag in ("observe_capsule", "observe_claw", "observe_clearance"):
             if not isinstance(getattr(self, flag), bool):
                 raise ValueError(f"GripperTask.{flag} must be true or false, got {getattr(self, flag)!r}")
         _nonneg(self, "angle_range", "push_coeff")

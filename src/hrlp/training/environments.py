@@ -78,7 +78,9 @@ class _BatchedMacroFactory(_MacroFactory, VectorConstructor):
     def vector(self, n: int, gamma: float) -> VectorEnv:
         if gamma != self.gamma:
             raise ValueError(f"the Manager's environments discount by {self.gamma}, not {gamma}")
-        return BatchedMacroVectorEnv(make_batched(self.name, n, **self.kwargs), self())
+        layout = self()
+        features = tuple(dict.fromkeys(f for s in layout.skills for f in s.features))  # what the skills read
+        return BatchedMacroVectorEnv(make_batched(self.name, n, features=features, **self.kwargs), layout)
 
 
 def run_factory(cfg: TrainConfig, task_kwargs: dict[str, Any] | None = None) -> Callable[[], gym.Env]:
