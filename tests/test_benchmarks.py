@@ -116,17 +116,21 @@ def test_gripper_handover_collects_three_banks_and_evaluates_every_start_set(tmp
     assert again.returncode == 2 and "exists" in again.stderr
 
 
-def test_claw_escape_builds_gripper_claws_recipe_with_the_escape_expert(tmp_path):
+@pytest.mark.parametrize("clearance", [False, True], ids=["escape", "escape-and-clearance"])
+def test_claw_escape_builds_gripper_claws_recipe_with_the_escape_expert(tmp_path, clearance):
     import json
 
     from hrlp.experiments.presets import PRESETS
 
     args = "--out cmp --steps 500 --expert-episodes 2 --noisy-expert-episodes 0 --dagger-rounds 0 --eval-episodes 0"
-    out = _run("claw_escape.py", args, tmp_path)
+    out = _run("claw_escape.py", args + " --observe-clearance" * clearance, tmp_path)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert "gripper-claw-escape: 25,024 TRPO steps, greedy success" in out.stdout
-    result = json.loads((tmp_path / "cmp" / "claw-escape" / "gripper-claw-escape" / "s0" / "result.json").read_text())
+    name = "gripper-claw-clearance" if clearance else "gripper-claw-escape"
+    assert f"{name}: 25,024 TRPO steps, greedy success" in out.stdout
+    result = json.loads((tmp_path / "cmp" / "claw-escape" / name / "s0" / "result.json").read_text())
     assert result["imitation"]["expert_escape_clearance"] == 0.01
     recipe = next(r for r in PRESETS["shipped-skills"].runs if r.name == "gripper-claw")
-    assert result["config"]["task_kwargs"] == recipe.config.task_kwargs  # gripper-claw's run, the expert aside
+    # gripper-claw's run, the expert aside (and the arm's distances to the capsule observed with --observe-clearance)
+    extra = {"observe_clearance": True} if clearance else {}
+    assert result["config"]["task_kwargs"] == {**recipe.config.task_kwargs, **extra}
     assert tuple(result["config"]["hidden"]) == tuple(recipe.config.hidden)

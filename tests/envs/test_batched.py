@@ -180,12 +180,14 @@ def test_every_other_registered_arm_task_gives_the_same_episodes_bit_for_bit(nam
         GripperTask(reward=GripReward(c4=1.0, distance="axis"), push_coeff=2.0, observe_capsule=True),
         GripperTask(observe_capsule=True, observe_claw=True),
         GripperTask(observe_claw=True),
+        GripperTask(observe_clearance=True, start_distance=(0.0, 0.03), finger_opening=(0.0, 1.0)),
         ReachAndGripTask(experiment=2, reward=GripReward(c4=0.5), curriculum_alpha=0.05),
     ],
     ids=[
         "gripper-axis-c4-push-observed",
         "gripper-capsule-and-claw-observed",
         "gripper-claw-observed",
+        "gripper-clearance-observed-close-starts",
         "reach-and-grip-curriculum-c4",
     ],
 )

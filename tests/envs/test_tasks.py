@@ -5,12 +5,14 @@ import math
 import warnings
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
 import hrlp.envs  # noqa: F401  (registers the ids)
 from hrlp.envs import TASKS, make
+from hrlp.envs.physics import CLEARANCE_BODIES
 from hrlp.envs.tasks import GripperTask, GripReward, ReachAndGripTask, SparseSuccess
 
 NAMES = list(TASKS)
@@ -359,3 +361,27 @@ def test_gripper_can_observe_the_claw_relative_to_the_capsule():
     assert only_claw.observation_space.shape == (39,) and only_claw.unwrapped.task.observed_features == ("claw_pose",)
     with pytest.raises(ValueError, match="observe_claw must be true or false"):
         make("Gripper", observe_claw=1)
+
+
+def test_gripper_can_observe_each_arm_bodys_distance_to_the_capsule():
+    # observe_clearance appends 5 numbers, last: for the upper arm, forearm, palm and the two fingers, the smallest
+    # mj_geomDistance of the body's geoms to the capsule, cut off at 5 cm.
+    env = make("Gripper", observe_claw=True, observe_clearance=True, start_distance=(0.0, 0.02), finger_opening=(0.5, 1.0))
+    assert env.observation_space.shape == (44,) and env.unwrapped.task.observed_features == ("claw_pose", "arm_clearance")
+    p = env.unwrapped.physics
+    m, cap = p.model, p.model.geom("object").id
+    for seed in range(5):
+        obs, _ = env.reset(seed=seed)
+        want = [min(mujoco.mj_geomDistance(m, p.data, g, cap, 0.05, None) for g in range(m.ngeom)
+                    if m.body(int(m.geom_bodyid[g])).name == body) for body in CLEARANCE_BODIES]  # fmt: skip
+        np.testing.assert_array_equal(obs[39:], want)
+        assert obs[39:].min() == p.arm_clearance()  # the expert's escape reads the smallest of them
+        assert obs[41:].max() < 0.05 and obs[39] == 0.05  # the claw within 2 cm of the capsule; the upper arm far
+    # The capsule moved a metre away: every body reads the cut-off.
+    qpos = p.data.qpos.copy()
+    qpos[p._obj_qpos] += 1.0
+    p.set_state_vectors(qpos, p.data.qvel.copy())
+    p.forward()
+    np.testing.assert_array_equal(p.feature("arm_clearance"), np.full(5, 0.05))
+    with pytest.raises(ValueError, match="observe_clearance must be true or false"):
+        make("Gripper", observe_clearance="no")

@@ -1,11 +1,11 @@
-"""Skills that read named observation features (the capsule's pose, the claw's pose relative to it) beyond the 24 base
-numbers and their parameters.
+"""Skills that read named observation features (the capsule's pose, the claw's pose relative to it, the arm's distances
+to it) beyond the 24 base numbers and their parameters.
 
-A Gripper trained with ``observe_capsule`` and ``observe_claw`` observes 45 numbers; as a skill it is given the 24 base
-numbers by the Manager and the 6 + 15 feature numbers by the environment it acts in, computed from that environment's
-physics. These tests check that every place a skill acts gives it the same 45 numbers its training task did: alone,
-inside a MacroEnv, and over the batched backend (including the first step after a reset, where the batched worlds'
-sensors must be current).
+A Gripper trained with ``observe_capsule``, ``observe_claw`` and ``observe_clearance`` observes 50 numbers; as a skill it
+is given the 24 base numbers by the Manager and the 6 + 15 + 5 feature numbers by the environment it acts in, computed
+from that environment's physics. These tests check that every place a skill acts gives it the same 50 numbers its training
+task did: alone, inside a MacroEnv, and over the batched backend (including the first step after a reset, where the
+batched worlds' sensors must be current, and the distance sensors that only worlds built for such a skill carry).
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ from hrlp.skills import SkillLibrary
 from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroSpec, MacroVectorEnv
 from hrlp.train import TrainConfig, load_policy, train
 
-SEEING = {"observe_capsule": True, "observe_claw": True}
-F = 6 + 15  # capsule_pose, claw_pose
+SEEING = {"observe_capsule": True, "observe_claw": True, "observe_clearance": True}
+FEATURES = ("capsule_pose", "claw_pose", "arm_clearance")
+F = 6 + 15 + 5
 N, EPISODE, K = 3, 12, 5
 
 
@@ -37,8 +38,8 @@ def seeing(tmp_path_factory):
 def test_a_skill_records_the_features_its_task_observed_and_acts_on_them_like_the_policy(seeing):
     run, lib = seeing
     skill, manifest = lib.load("seeing"), lib.manifest("seeing")
-    assert (skill.features, skill.feature_dim, skill.obs_dim) == (("capsule_pose", "claw_pose"), F, 24 + F)
-    assert (manifest["features"], manifest["obs_dim"]) == (["capsule_pose", "claw_pose"], 24 + F)
+    assert (skill.features, skill.feature_dim, skill.obs_dim) == (FEATURES, F, 24 + F)
+    assert (manifest["features"], manifest["obs_dim"]) == (list(FEATURES), 24 + F)
     env = make("Gripper", episode_steps=25, **SEEING)
     obs, _ = env.reset(seed=3)
     # The environment computes the features from its physics exactly as the task observes them.
@@ -53,9 +54,10 @@ def test_a_skill_records_the_features_its_task_observed_and_acts_on_them_like_th
 
 def test_a_skill_without_the_features_it_reads_is_refused_with_one_line(seeing):
     skill = seeing[1].load("seeing")
-    with pytest.raises(ValueError, match=r"reads the observation features capsule_pose, claw_pose; pass them \(\[N, 21\]\)"):
+    names = "capsule_pose, claw_pose, arm_clearance"
+    with pytest.raises(ValueError, match=rf"reads the observation features {names}; pass them \(\[N, 26\]\)"):
         skill.act(np.zeros((2, 24)), np.zeros((2, 0)))
-    with pytest.raises(ValueError, match=r"features \(capsule_pose, claw_pose\) must have shape \[2, 21\], got \[2, 6\]"):
+    with pytest.raises(ValueError, match=rf"features \({names}\) must have shape \[2, 26\], got \[2, 6\]"):
         skill.act(np.zeros((2, 24)), np.zeros((2, 0)), np.zeros((2, 6)))
     with pytest.raises(ValueError, match="NaN or inf"):
         skill.act(np.zeros((1, 24)), np.zeros((1, 0)), np.full((1, F), np.nan))
@@ -90,7 +92,8 @@ def test_the_batched_manager_gives_the_skill_the_same_features_after_every_reset
     skill = seeing[1].load("seeing")
     layout = MacroEnv(make("Gripper", episode_steps=EPISODE), [skill], k=K)
     serial = MacroVectorEnv([MacroEnv(make("Gripper", episode_steps=EPISODE), [skill], k=K) for _ in range(N)])
-    batched = BatchedMacroVectorEnv(make_batched("Gripper", N, episode_steps=EPISODE, backend=backend), layout)
+    batched = BatchedMacroVectorEnv(make_batched("Gripper", N, episode_steps=EPISODE, backend=backend, features=FEATURES),
+                                    layout)  # fmt: skip
     np.testing.assert_array_equal(serial.reset(seed=7), batched.reset(seed=7))
     atol = 1e-7 if backend == "loop" else 1e-6
     ended = 0
@@ -101,6 +104,18 @@ def test_the_batched_manager_gives_the_skill_the_same_features_after_every_reset
         np.testing.assert_array_equal(b.tau, a.tau)
         ended += int(a.truncated.sum())
     assert ended >= 2 * N
+
+
+def test_batched_worlds_without_the_clearance_sensors_are_refused_for_a_skill_that_reads_them(seeing):
+    skill = seeing[1].load("seeing")
+    layout = MacroEnv(make("Gripper", episode_steps=EPISODE), [skill], k=K)
+    plain = make_batched("Gripper", N, episode_steps=EPISODE)
+    assert plain.measured_features == ("capsule_pose", "claw_pose")
+    with pytest.raises(ValueError, match=r"the skills read arm_clearance, which the worlds do not measure; build them with "
+                                         r"features=\('capsule_pose', 'claw_pose', 'arm_clearance'\)"):  # fmt: skip
+        BatchedMacroVectorEnv(plain, layout)
+    with pytest.raises(ValueError, match="unknown observation feature"):
+        make_batched("Gripper", N, features=("arm_distance",))
 
 
 def test_a_manager_trains_with_a_seeing_gripper_on_both_backends(seeing, tmp_path):

@@ -680,6 +680,12 @@ class BatchedArmEnv:
             physics_seconds=seconds,
         )
 
+    @property
+    def measured_features(self) -> tuple[str, ...]:
+        """The named observation features :meth:`features` gives (``arm_clearance`` only where these worlds were built
+        with its distance sensors: the task observes it, or ``features`` named it)."""
+        return tuple(f for f in OBS_FEATURES if f != "arm_clearance" or self._measure().clearance is not None)
+
     def features(self, name: str) -> np.ndarray:
         """The named observation feature (:data:`~hrlp.envs.physics.OBS_FEATURES`) of every world's current state,
         ``[N, width]`` (what a skill that reads it is given; :meth:`ArmPhysics.feature` for one world)."""

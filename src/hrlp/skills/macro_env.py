@@ -551,6 +551,10 @@ class BatchedMacroVectorEnv:
         if type(worlds.task) is not type(layout.env.task):
             raise ValueError(f"BatchedMacroVectorEnv: the worlds run {type(worlds.task).__name__}, the layout's "
                              f"macro-actions {type(layout.env.task).__name__}")  # fmt: skip
+        read = dict.fromkeys(f for s in layout.skills for f in s.features)
+        if missing := [f for f in read if f not in worlds.measured_features]:
+            raise ValueError(f"BatchedMacroVectorEnv: the skills read {', '.join(missing)}, which the worlds do not measure; "
+                             f"build them with features={tuple(read)!r}")  # fmt: skip
         self.worlds, self.layout, self.gamma = worlds, layout, layout.gamma
         self._act_dim = 1 + int(layout.offsets[-1])
         self._obs: np.ndarray | None = None
