@@ -34,13 +34,15 @@ def main() -> None:
     ap.add_argument("--expert-episodes", type=int, default=None, help="(default: the recipe's; smaller for a quick check)")
     ap.add_argument("--noisy-expert-episodes", type=int, default=None)
     ap.add_argument("--dagger-rounds", type=int, default=None)
+    ap.add_argument("--dagger-episodes", type=int, default=None, help="episodes per DAgger round (default: the recipe's)")
     ap.add_argument("--eval-episodes", type=int, default=None, help="imitation rounds' evaluation episodes")
     args = ap.parse_args()
     shipped = PRESETS["shipped-skills"]
     run = next(r for r in shipped.runs if r.name == "gripper-claw")
     assert run.imitation is not None
     changes = {k: v for k, v in {"expert_episodes": args.expert_episodes, "noisy_expert_episodes": args.noisy_expert_episodes,
-                                 "dagger_rounds": args.dagger_rounds, "eval_episodes": args.eval_episodes}.items()
+                                 "dagger_rounds": args.dagger_rounds, "dagger_episodes": args.dagger_episodes,
+                                 "eval_episodes": args.eval_episodes}.items()
                if v is not None}  # fmt: skip
     try:
         imitation = dataclasses.replace(run.imitation, expert_escape_clearance=args.escape_clearance, **changes)
