@@ -83,6 +83,21 @@ def test_claw_pose_known_answer():
     np.testing.assert_array_equal(claw_pose_rows(m)[0], [0, 1, 2, 0.5, 1, 2, -0.5, 1, 2, 0, 0, -1, 0, 1, 0])
 
 
+def test_the_clearance_sensors_are_added_only_to_worlds_that_read_them():
+    # Five distance sensors (one number each) after the eight 3-number ones, only where the task or a skill reads them.
+    assert measured_model(PhysicsConfig()).nsensordata == 24
+    assert measured_model(PhysicsConfig(), clearance=True).nsensordata == 24 + 5
+    plain, seeing = make_batched("Gripper", 2), make_batched("Gripper", 2, observe_clearance=True)
+    extra = make_batched("Reacher", 2, features=("arm_clearance",))
+    assert "arm_clearance" not in plain.measured_features and plain.model.nsensordata == 24
+    assert "arm_clearance" in seeing.measured_features and "arm_clearance" in extra.measured_features
+    extra.reset(seed=0)
+    assert extra.features("arm_clearance").shape == (2, 5)
+    plain.reset(seed=0)
+    with pytest.raises(ValueError, match="needs the worlds' distance sensors"):
+        plain.features("arm_clearance")
+
+
 def test_info_arrays_and_action_checks():
     out = info_arrays([{"a": 1.0, "b": True, "success": True, "w": {"x": 1}}, {"a": 2.0}])
     assert set(out) == {"a", "b", "physics_unstable"}
