@@ -88,7 +88,7 @@ SENSORS: tuple[tuple[str, int, int, str], ...] = (
     ("hrlp_claw_x", _S.mjSENS_FRAMEXAXIS, _O.mjOBJ_XBODY, "claw"),  # column 0 of xmat[claw]: the fingers' direction
     ("hrlp_claw_y", _S.mjSENS_FRAMEYAXIS, _O.mjOBJ_XBODY, "claw"),  # column 1 of xmat[claw]: the closing direction
 )
-#: Distance sensors added for the ``arm_clearance`` feature only (they cost about a tenth of a physics step): for each
+#: Distance sensors added for the ``arm_clearance`` feature only (MuJoCo computes them at every substep): for each
 #: body of :data:`~hrlp.envs.physics.CLEARANCE_BODIES`, the smallest distance of its geoms to the capsule, cut off at
 #: :data:`~hrlp.envs.physics.CLEARANCE_CUTOFF` (one number each; what :meth:`ArmPhysics.arm_clearance_features` computes).
 CLEARANCE_SENSORS: tuple[tuple[str, str], ...] = tuple((f"hrlp_clearance_{b}", b) for b in CLEARANCE_BODIES)
