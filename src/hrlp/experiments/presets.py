@@ -275,6 +275,10 @@ IMITATED_GRIPPER = ImitationConfig(expert_episodes=150, dagger_rounds=2, dagger_
 #: alone) kept; the expert whose moves keep clear.
 CLAW_GRIPPER = ImitationConfig(expert_episodes=300, noisy_expert_episodes=300, expert_noise=0.3, dagger_rounds=4,
                                dagger_episodes=200, epochs=40, minibatch=512, lr_decay=True, eval_episodes=100)  # fmt: skip
+#: gripper-clearance's imitation: the scripted grasp with its escape from tight starts, and five times the round-0 data of
+#: CLAW_GRIPPER (1,000 expert and 1,000 noisy-expert episodes, 400 per DAgger round); docs/skills.md.
+CLEARANCE_GRIPPER = replace(CLAW_GRIPPER, expert_episodes=1000, noisy_expert_episodes=1000, dagger_episodes=400,
+                            expert_escape_clearance=0.01)  # fmt: skip
 
 
 def _shipped_skills() -> Preset:
@@ -287,7 +291,8 @@ def _shipped_skills() -> Preset:
         "with the paper's three-term reward alone it hovers); Reacher3D; ReacherStabilised (level_coeff 0.1: with 0.5 no "
         "goal near the table is reached); the Movers from grip starts (scripts/make_mover_starts.py records them from "
         "the Gripper); a Reacher trained for hand-over (ReacherHandover: pre-grasp goals above the capsule, the capsule left "
-        "in place, the claw open); a Gripper seeing the capsule's pose, imitated from the scripted grasp, then TRPO; a "
+        "in place, the claw open); a Gripper seeing the capsule's pose, imitated from the scripted grasp, then TRPO, and one "
+        "also seeing the arm's distances to the capsule, imitated from the grasp that escapes tight starts; a "
         "Mover from held starts (the capsule in that Gripper's claw); docs/skills.md",
         "Section 4.1",
         (
@@ -316,6 +321,13 @@ def _shipped_skills() -> Preset:
                                             task_kwargs={**gripper.task_kwargs, "observe_capsule": True,
                                                          "observe_claw": True}),
                 steps=8_000_000, skill=("gripper-claw", 15), imitation=CLAW_GRIPPER),
+            # gripper-claw's run that also sees each arm body's distance to the capsule (observe_clearance), imitated
+            # from the escaping expert with five times the data (CLEARANCE_GRIPPER), then the same TRPO.
+            Run("gripper-clearance", TrainConfig(task="Gripper", workers=1, backend="batched", batch_steps=25_000,
+                                                 episode_steps=100, hidden=(256, 256), init_log_std=-2.0,
+                                                 task_kwargs={**gripper.task_kwargs, "observe_capsule": True,
+                                                              "observe_claw": True, "observe_clearance": True}),
+                steps=8_000_000, skill=("gripper-clearance", 15), imitation=CLEARANCE_GRIPPER),
             # MoverNoised's recipe from the held starts (the capsule in gripper-imitated's claw): a Mover that carries what
             # the Gripper gripped, one process on the batched backend.
             Run("mover-held", replace(_flat("MoverNoised", 25_000, episode_steps=100, init_log_std=-1.0), workers=1,
