@@ -563,6 +563,14 @@ PRESETS: dict[str, Preset] = {
             budget=3_000_000,
         ),
         Preset(
+            "reach-and-grip-2-clearance",
+            "reach-and-grip-2-claw with gripper-clearance (the Gripper that also sees the arm's distances to the capsule) "
+            "in place of gripper-claw; paper: its figure for the same set with its own skills",
+            "Section 4.3.1, Figure 7",
+            _figure_7_with("gripper-clearance", s_reacher=True),
+            budget=3_000_000,
+        ),
+        Preset(
             "reach-and-grip-2",
             "reach-and-grip Experiment 2, Manager over four skill sets x the reward grid c2 x tr, k = 15",
             "Section 4.3.1, Figure 7",
