@@ -9,7 +9,8 @@ evaluate it with ``benchmarks/gripper_diagnosis.py`` and ``benchmarks/gripper_ha
 
 With ``--observe-clearance`` the student (and so the skill) also sees each arm body's distance to the capsule
 (``GripperTask.observe_clearance``, 5 numbers: what the expert's escape decides on), and the run is named
-``gripper-claw-clearance``.
+``gripper-claw-clearance``. The shipped ``gripper-clearance`` is that run with five times the imitation's data
+(``--expert-episodes 1000 --noisy-expert-episodes 1000 --dagger-episodes 400``; its recipe in ``shipped-skills``).
 
     python benchmarks/claw_escape.py --out runs/claw-escape
     python benchmarks/claw_escape.py --out runs/claw-escape --observe-clearance
