@@ -73,7 +73,8 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     assert all(r.config.macro is None or r.config.macro.handover is None
                for p in PRESETS.values() if "handover" not in p.name
                and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated", "reach-and-grip-1-imitated",
-                                 "reach-and-grip-1-claw", "reach-and-grip-2-claw", "reach-and-move-imitated",
+                                 "reach-and-grip-1-claw", "reach-and-grip-2-claw", "reach-and-grip-2-clearance",
+                                 "reach-and-move-imitated",
                                  "reach-and-move-chained") for r in p.runs)  # fmt: skip
     # The imitated grid is the reacher-handover grid and the tuned gripper + micro cells with gripper-imitated in place
     # of the gripper, and nothing else.
@@ -105,6 +106,20 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
                                                   for i, s in enumerate(other.config.macro.skills)), r.name  # fmt: skip
             assert replace(r.config, macro=replace(r.config.macro, skills=other.config.macro.skills)) == other.config, r.name
             assert r.paper == other.paper, r.name
+    # The clearance grid is Figure 7's claw grid with gripper-clearance in place of gripper-claw, and nothing else.
+    claw_2 = {r.name: r for r in PRESETS["reach-and-grip-2-claw"].runs}
+    clearance = PRESETS["reach-and-grip-2-clearance"].runs
+    assert (
+        len(clearance) == len(claw_2)
+        and PRESETS["reach-and-grip-2-clearance"].budget == PRESETS["reach-and-grip-2-claw"].budget
+    )
+    for r in clearance:
+        other = claw_2[r.name.replace("gripper-clearance", "gripper-claw")]
+        assert r.config.macro.skills == tuple(
+            s.replace("gripper-claw", "gripper-clearance") for s in other.config.macro.skills
+        )
+        assert replace(r.config, macro=replace(r.config.macro, skills=other.config.macro.skills)) == other.config, r.name
+        assert r.paper == other.paper, r.name
     # reach-and-move with the imitated skills: reach (capsule-relative goals, the Reacher's own claw), grip, carry (the
     # Mover's target a world point), with the headline's Manager settings; TargetDistSum beside the paper's best pair.
     carry, carry_10 = PRESETS["reach-and-move-imitated"].runs
