@@ -552,8 +552,8 @@ class BatchedArmEnv:
         if unknown := [f for f in features if f not in OBS_FEATURES]:
             raise ValueError(f"{who}: unknown observation feature(s) {', '.join(map(repr, unknown))} (known: "
                              f"{', '.join(OBS_FEATURES)})")  # fmt: skip
-        clearance = "arm_clearance" in (*self.task.observed_features, *features)
-        self.model = model = measured_model(config, clearance)
+        self._clearance = "arm_clearance" in (*self.task.observed_features, *features)  # with its distance sensors
+        self.model = model = measured_model(config, self._clearance)
         nint = mujoco.mj_stateSize(model, _INTEGRATION)
         if nint != mujoco.mj_stateSize(self._scratch.model, _INTEGRATION):  # pragma: no cover - sensors hold no state
             raise AssertionError("the measured model's integration state differs from the arm's")
@@ -684,7 +684,7 @@ class BatchedArmEnv:
     def measured_features(self) -> tuple[str, ...]:
         """The named observation features :meth:`features` gives (``arm_clearance`` only where these worlds were built
         with its distance sensors: the task observes it, or ``features`` named it)."""
-        return tuple(f for f in OBS_FEATURES if f != "arm_clearance" or self._measure().clearance is not None)
+        return tuple(f for f in OBS_FEATURES if f != "arm_clearance" or self._clearance)
 
     def features(self, name: str) -> np.ndarray:
         """The named observation feature (:data:`~hrlp.envs.physics.OBS_FEATURES`) of every world's current state,
@@ -731,7 +731,7 @@ class BatchedArmEnv:
         target = 3 * int(m.body_mocapid[m.body("target").id])
         half = float(m.geom_size[m.geom("object").id, 1])
         clearance = None
-        if m.nsensordata > 3 * len(SENSORS):  # the clearance sensors, one number each, added last in order: a view
+        if self._clearance:  # the clearance sensors, one number each, added last in order: a view
             first = int(m.sensor(CLEARANCE_SENSORS[0][0]).adr[0])
             clearance = sens[:, first : first + len(CLEARANCE_SENSORS)]
 

@@ -285,6 +285,9 @@ def _shipped_skills() -> Preset:
     """The recipes of the skills shipped in ``src/hrlp/skills/pretrained/`` (``hrlp skills build`` trains them and adds
     them to a library; a test checks that every shipped skill's manifest records exactly its run's config)."""
     gripper = _flat("Gripper", 25_000, episode_steps=100, init_log_std=-1.0, task_kwargs={**GRIPPER_START, "c3": -8, "c4": 10})
+    claw = TrainConfig(task="Gripper", workers=1, backend="batched", batch_steps=25_000, episode_steps=100,
+                       hidden=(256, 256), init_log_std=-2.0,
+                       task_kwargs={**gripper.task_kwargs, "observe_capsule": True, "observe_claw": True})  # fmt: skip
     return Preset(
         "shipped-skills",
         "the shipped skills: Reacher; Gripper from many close, open-claw starts (c3 -8 and a bonus c4 10 while gripped: "
@@ -316,17 +319,10 @@ def _shipped_skills() -> Preset:
                 steps=8_000_000, skill=("gripper-imitated", 15), imitation=IMITATED_GRIPPER),
             # The same task seeing the claw's pose relative to the capsule too (claw_pose: H, FT1, FT2 less C, the palm's
             # axes), imitated with CLAW_GRIPPER, then TRPO with the fast defaults of 3 Dec 2026 in one process.
-            Run("gripper-claw", TrainConfig(task="Gripper", workers=1, backend="batched", batch_steps=25_000,
-                                            episode_steps=100, hidden=(256, 256), init_log_std=-2.0,
-                                            task_kwargs={**gripper.task_kwargs, "observe_capsule": True,
-                                                         "observe_claw": True}),
-                steps=8_000_000, skill=("gripper-claw", 15), imitation=CLAW_GRIPPER),
+            Run("gripper-claw", claw, steps=8_000_000, skill=("gripper-claw", 15), imitation=CLAW_GRIPPER),
             # gripper-claw's run that also sees each arm body's distance to the capsule (observe_clearance), imitated
             # from the escaping expert with five times the data (CLEARANCE_GRIPPER), then the same TRPO.
-            Run("gripper-clearance", TrainConfig(task="Gripper", workers=1, backend="batched", batch_steps=25_000,
-                                                 episode_steps=100, hidden=(256, 256), init_log_std=-2.0,
-                                                 task_kwargs={**gripper.task_kwargs, "observe_capsule": True,
-                                                              "observe_claw": True, "observe_clearance": True}),
+            Run("gripper-clearance", replace(claw, task_kwargs={**claw.task_kwargs, "observe_clearance": True}),
                 steps=8_000_000, skill=("gripper-clearance", 15), imitation=CLEARANCE_GRIPPER),
             # MoverNoised's recipe from the held starts (the capsule in gripper-imitated's claw): a Mover that carries what
             # the Gripper gripped, one process on the batched backend.
