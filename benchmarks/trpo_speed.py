@@ -32,6 +32,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import gymnasium as gym
 import mujoco
@@ -141,6 +142,36 @@ def hrlp_run(task: str, steps: int, seed: int, settings: dict[str, object]) -> d
             "workers": trainer.cfg.workers, **{k: v / wall for k, v in shares.items()}}  # fmt: skip
 
 
+#: The arm task's fastest settings as the benchmark of an older checkout runs them (``hrlp_run``'s keywords at commit
+#: 436d424, 24 Nov 2026, when issue 17 set the goal ">= 2x today's fastest steps/s on ReachAndGrip2": two sampling
+#: workers, 64 environments, Fisher products on 10%, the baseline by 10 L-BFGS iterations on every 4th step).
+BASELINE_FASTEST = {"workers": 2, "fisher_fraction": 0.1, "num_envs": 64, "value_iters": 10, "value_fraction": 0.25}
+
+
+def check_checkout(checkout: str) -> Path:
+    """``checkout`` resolved, or SystemExit in one line when it holds no hrlp code to run."""
+    root = Path(checkout).resolve()
+    if not (root / "benchmarks" / "trpo_speed.py").is_file() or not (root / "src" / "hrlp").is_dir():
+        raise SystemExit(f"--baseline-checkout {checkout}: not an hrlp checkout (no benchmarks/trpo_speed.py, src/hrlp)")
+    return root
+
+
+def baseline_run(checkout: str, steps: int, batch_steps: int, seed: int) -> dict[str, float]:
+    """The fastest settings on ReachAndGrip2 with an older checkout's code (``checkout``: a ``git worktree`` of it),
+    through that checkout's own ``benchmarks/trpo_speed.py`` in a subprocess, so that this run compares today's
+    defaults with the code of the day the goal was set, on the same host at the same hour."""
+    import json
+    import os
+
+    root = check_checkout(checkout)
+    code = ("import json, sys, torch; torch.set_num_threads(1); sys.path.insert(0, 'benchmarks'); "
+            "from trpo_speed import hrlp_run; "
+            f"print(json.dumps(hrlp_run({ARM_TASK!r}, {steps}, {batch_steps}, {seed}, **{BASELINE_FASTEST!r})))")  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(root / "src")}
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def physics_step_seconds(model: mujoco.MjModel, data: mujoco.MjData, nsub: int, n: int, episode: int,
                          reset: Callable[[], object] | None = None) -> float:  # fmt: skip
     """Seconds per control step of bare ``mj_step`` (``nsub`` substeps) with random controls, ``reset`` (default
@@ -221,6 +252,12 @@ def main() -> None:
     ap.add_argument("--fastest-value-fraction", type=float, default=0.25, help="share of time steps the fastest run fits on")
     ap.add_argument("--defaults-batch-steps", type=int, default=None,
                     help="batch of the defaults run (default: TrainConfig's, as hrlp train runs it)")  # fmt: skip
+    ap.add_argument(
+        "--baseline-checkout",
+        default=None,
+        help="an older hrlp checkout (git worktree) whose fastest ReachAndGrip2 settings (BASELINE_FASTEST) "
+        "also run, in a subprocess with its own code; the defaults' steps/s are then given as a ratio to it",
+    )
     ap.add_argument("--skip", default="", help="comma-separated: pusher (hrlp on it),sb3,tianshou,arm,rss")
     ap.add_argument("--rss-child", help=argparse.SUPPRESS)
     ap.add_argument("--rss-baseline", action="store_true", help=argparse.SUPPRESS)
@@ -230,6 +267,8 @@ def main() -> None:
         return
     torch.set_num_threads(1)
     skip = set(filter(None, args.skip.split(",")))
+    if args.baseline_checkout is not None:
+        check_checkout(args.baseline_checkout)
 
     from hrlp.config import PAPER_SETTINGS, TrainConfig
 
@@ -282,6 +321,7 @@ def main() -> None:
         aphys = arm_physics(args.physics_steps)
         serial_name = "hrlp defaults, serial backend (--backend serial)"
         one_name = "hrlp defaults, one worker (--workers 1)"
+        arm_rates: dict[str, float] = {}
         arm_runs = ((paper_name, paper), (fast_name, fast), (fastest_name, fastest),
                     (serial_name, {**defaults, "backend": "serial"}), (defaults_name, defaults),
                     (one_name, {**defaults, "workers": 1}))  # fmt: skip
@@ -289,6 +329,7 @@ def main() -> None:
             if name in with_workers and args.workers < 2:
                 continue
             arm = hrlp_run(ARM_TASK, args.arm_steps, args.seed, kw)
+            arm_rates[name] = arm["steps_per_s"]
             cores = int(arm["workers"])
             print(
                 f"\n{ARM_TASK}, {name}, {arm['steps']} env steps: {arm['steps_per_s']:.0f} steps/s, physics alone "
@@ -298,6 +339,17 @@ def main() -> None:
                 f"time shares: env {arm['env']:.1%}, inference {arm['inference']:.1%}, value fit {arm['value_fit']:.1%}, "
                 f"update {arm['update']:.1%}; mj_step share of {cores} core(s) x wall: measured in the run "
                 f"{arm['physics']:.1%}, estimated from bare mj_step {arm['steps'] * aphys / (arm['wall'] * cores):.1%}"
+            )
+
+        if args.baseline_checkout is not None:
+            commit = subprocess.run(["git", "-C", args.baseline_checkout, "rev-parse", "--short", "HEAD"],
+                                    capture_output=True, text=True).stdout.strip() or "?"  # fmt: skip
+            base = baseline_run(args.baseline_checkout, args.arm_steps, args.batch_steps, args.seed)
+            print(
+                f"\n{ARM_TASK}, fastest settings with the code of {Path(args.baseline_checkout).name} (commit {commit}), "
+                f"{base['steps']:.0f} env steps: {base['steps_per_s']:.0f} steps/s; today's defaults / it: "
+                f"{arm_rates[defaults_name] / base['steps_per_s']:.2f}x, today's fastest / it: "
+                f"{arm_rates.get(fastest_name, float('nan')) / base['steps_per_s']:.2f}x"
             )
 
     if "rss" not in skip:

@@ -134,3 +134,11 @@ def test_claw_escape_builds_gripper_claws_recipe_with_the_escape_expert(tmp_path
     extra = {"observe_clearance": True} if clearance else {}
     assert result["config"]["task_kwargs"] == {**recipe.config.task_kwargs, **extra}
     assert tuple(result["config"]["hidden"]) == tuple(recipe.config.hidden)
+
+
+def test_trpo_speed_refuses_a_baseline_checkout_without_hrlp_before_training(tmp_path):
+    out = _run("trpo_speed.py", f"--baseline-checkout {tmp_path} --steps 1000", tmp_path)
+    assert out.returncode == 1 and out.stdout == ""
+    assert (
+        out.stderr.strip() == f"--baseline-checkout {tmp_path}: not an hrlp checkout (no benchmarks/trpo_speed.py, src/hrlp)"
+    )

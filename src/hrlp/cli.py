@@ -402,8 +402,6 @@ _LEFT_OUT: dict[type, dict[str, str]] = {
         "macro": "a MacroSpec that train-manager's own options build (--skills, --k, --library, --micro..., --handover...); "
         "a flat run has none",
         "task_kwargs": "given as --task-arg NAME=VALUE, repeatable (a dict has no one-token form), below",
-        "init_from": "set by 'hrlp dagger', which warm-starts a skill's retraining; a fresh run starts from a fresh "
-        "network and an interrupted one continues with --resume",
     },
 }
 """The config fields that are deliberately not generated options, and why."""
@@ -430,7 +428,7 @@ _PANELS = {TrainConfig: "Run (TrainConfig)", AdvantageConfig: "Advantages (Advan
 """The help's section for each dataclass's options."""
 
 _OPTION_TYPES: dict[str, Any] = {"int": int, "float": float, "bool": bool, "str": str, "int | None": int | None,
-                                 "tuple[int, ...]": str}  # fmt: skip
+                                 "str | None": str | None, "tuple[int, ...]": str}  # fmt: skip
 """The option's type for a field's annotation; a tuple of integers is given as ``64,64`` (:func:`check.widths`)."""
 
 _CHECKS: dict[str, check.Check] = {  # the bounds checked while the options are parsed, in hrlp.bounds' words
@@ -444,6 +442,7 @@ _CHECKS: dict[str, check.Check] = {  # the bounds checked while the options are 
     "init_log_std": check.real(),
     "episodes": check.count(1, bounds.MAX_STEPS, bounds.WHY_STEPS, "number of episodes"),
     "reward_scale": check.real(0.0, low_open=True),
+    "init_from": check.skill_ref,
     "max_kl": check.real(0.0, low_open=True),
     "cg_iters": check.count(1, 1000, "each iteration is a Fisher-vector product over the batch"),
     "cg_damping": check.real(0.0),
@@ -787,6 +786,9 @@ def _train(ctx: typer.Context, macro: Any, run_dir: Path | None, resume: bool, t
         else:
             if checkpoint_exists(out / "checkpoint"):
                 raise ValueError(f"{out} already holds a run; pass --resume to continue it or choose another --run-dir")
+            if manager_command and p["init_from"] is not None:
+                raise ValueError("--init-from starts a flat run from a skill's weights; a Manager starts from a fresh "
+                                 "network (its skills are given by --skills)")  # fmt: skip
             nested = {name: config(**_config_kwargs(p, config)) for config, name in _NESTED.items()}
             cfg = TrainConfig(task=task, **_config_kwargs(p, TrainConfig), **nested, macro=macro,
                               task_kwargs=parse_task_args(task_arg))  # fmt: skip

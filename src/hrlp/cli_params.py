@@ -153,3 +153,16 @@ def existing_dir(param: typer.CallbackParam, value: Path | None) -> Path | None:
     if not value.is_dir():
         raise BoundError(f"{_flag(param)} {value}: {'not a directory' if value.exists() else 'no such directory'}")
     return value
+
+
+def skill_ref(param: typer.CallbackParam, value: str | None) -> str | None:
+    """A skill to start from: a skill directory (holding ``meta.json``) or a plain skill name, looked up in the libraries
+    when the run is built (a path that is no skill directory is refused here)."""
+    if value is None:
+        return value
+    path = Path(value)
+    if (path / "meta.json").is_file():
+        return value
+    if path.exists() or "/" in value or value in ("", ".", ".."):
+        raise BoundError(f"{_flag(param)} {value}: neither a skill directory (with meta.json) nor a skill name")
+    return value

@@ -223,7 +223,8 @@ class TrainConfig:
     """Arguments of the task, e.g. ``{"c1": -10.0}`` (Gripper reward constants) or ``{"curriculum_alpha": 1e-4}``."""
     init_from: str | None = None
     """For a flat run: a skill (a name in the libraries a Manager searches, or a skill directory) whose policy and
-    observation statistics the run starts from instead of a fresh network (DAgger retraining, ``hrlp dagger``)."""
+    observation statistics the run starts from instead of a fresh network: fine-tuning a skill, and DAgger retraining
+    (``hrlp dagger``). The run must have the skill's task, observations and hidden layers."""
     episodes: int | None = None
     """Training episodes in total (None: no episode budget). The run stops after the iteration in which the step budget
     or this one is reached, whichever comes first; an episode counts when it ends (terminated or truncated)."""

@@ -4,6 +4,7 @@ skill's weights as a run's starting point (:func:`warm_start`).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,22 +41,38 @@ from hrlp.training.environments import (
 def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) -> None:
     """Copy the skill ``cfg.init_from`` (its policy's weights and its observation statistics, thawed) into a fresh
     flat run's ``policy`` and ``normalizer``. Raises ValueError naming the skill when it does not fit the run."""
-    from hrlp.skills.library import SkillLibrary, load_skill
+    from hrlp.skills.library import SkillLibrary, locate_skill, search_roots
 
     assert cfg.init_from is not None
     if cfg.macro is not None:
         raise ValueError("init_from starts a flat run from a skill; a Manager cannot start from one")
     where = Path(cfg.init_from)
-    skill = SkillLibrary(where.parent).load(where.name) if (where / "meta.json").is_file() else load_skill(cfg.init_from)
+    library, name = (SkillLibrary(where.parent), where.name) if (where / "meta.json").is_file() else (
+        locate_skill(cfg.init_from, search_roots()), cfg.init_from)  # fmt: skip
+    skill = library.load(name)
     task = cfg.task.removeprefix("hrlp/").removesuffix("-v0")
     if not isinstance(policy, GaussianPolicy) or skill.obs_dim != normalizer.mean.shape[0] or task != skill.task:
         raise ValueError(f"init_from: skill {skill.name} ({skill.task}, {skill.obs_dim} observations) does not fit a "
-                         f"{task} run with {normalizer.mean.shape[0]} observations")  # fmt: skip
+                         f"{task} run with {normalizer.mean.shape[0]} observations{_trained_with(library, name)}")  # fmt: skip
     try:
         policy.load_state_dict(skill.policy.state_dict())
     except RuntimeError:
-        raise ValueError(f"init_from: skill {skill.name}'s network does not have hidden layers {cfg.hidden}") from None
+        raise ValueError(f"init_from: skill {skill.name}'s network does not have hidden layers "
+                         f"{cfg.hidden}{_trained_with(library, name)}") from None  # fmt: skip
     normalizer.load_state_dict(skill.normalizer.state_dict())
+
+
+def _trained_with(library: Any, name: str) -> str:
+    """``"; it was trained ..."``: the task arguments and hidden layers of the skill's own training run, as options to
+    give a run that starts from it ("" where its manifest records no training config)."""
+    config = (library.manifest(name).get("trained") or {}).get("config") or {}
+    if not isinstance(config, dict) or "task" not in config:
+        return ""
+    args = " ".join(
+        f"--task-arg {k}={json.dumps(v, separators=(',', ':'))}" for k, v in (config.get("task_kwargs") or {}).items()
+    )
+    hidden = ",".join(map(str, config.get("hidden") or ()))
+    return f"; it was trained on {config['task']} with {args or 'no task arguments'} --hidden {hidden}"
 
 
 #: Keys of a training run's checkpoint meta that its readers need, with their JSON types. ``meta.json`` is not covered
