@@ -280,6 +280,15 @@ def test_init_from_starts_a_flat_run_from_a_skill_and_resume_keeps_it(tmp_path):
     skill = load_skill("gripper").policy.state_dict()
     first = next(k for k in skill if k.endswith("weight"))
     assert float((tensors[f"policy.{first}"] - skill[first]).abs().max()) < 0.05
+    # Frozen, it records the skill it started from, with the hash that skill had.
+    from hrlp.skills.library import SkillLibrary
+
+    lib = SkillLibrary(tmp_path / "lib")
+    lib.add(run, "gripper-more")
+    assert lib.manifest("gripper-more")["lineage"] == {
+        "parent": "gripper",
+        "parent_sha256": load_skill("gripper").content_hash,
+    }
     again = CliRunner().invoke(app, ["train", "Gripper", "--run-dir", str(run), "--resume", "--init-from", "reacher"])
     assert again.exit_code == 2 and "--init-from reacher (the run: gripper)" in " ".join(again.output.split())
 

@@ -301,7 +301,8 @@ class SkillLibrary:
         """Turn a finished training run into the named skill with default duration ``k``; returns its directory.
 
         ``lineage`` (JSON), if given, is recorded in the manifest: where the skill came from (``hrlp dagger`` records
-        the parent skill and its sha256, the Manager whose hand-over states it was retrained from, and the round)."""
+        the parent skill and its sha256, the Manager whose hand-over states it was retrained from, and the round). A
+        run started from a skill (``init_from``) records that skill and the sha256 it had then when none is given."""
         check_skill_name(name)
         if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= MAX_K:
             raise ValueError(f"skill {name}: default duration k must be a positive integer (at most {MAX_K:,}), got {k!r}")
@@ -323,6 +324,9 @@ class SkillLibrary:
             "normalizer": src["normalizer"],
             "trained": {"config": src["config"], "iteration": src["iteration"], "env_steps": src["env_steps"]},
         }
+        init_from = src["config"].get("init_from")
+        if lineage is None and isinstance(init_from, str):  # fine-tuned from a skill (hrlp train --init-from)
+            lineage = {"parent": init_from, "parent_sha256": src.get("init_from_sha256")}
         if lineage is not None:
             manifest["lineage"] = lineage
         return save_checkpoint(target, tensors, manifest)

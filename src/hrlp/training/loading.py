@@ -38,9 +38,10 @@ from hrlp.training.environments import (
 )
 
 
-def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) -> None:
+def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) -> str:
     """Copy the skill ``cfg.init_from`` (its policy's weights and its observation statistics, thawed) into a fresh
-    flat run's ``policy`` and ``normalizer``. Raises ValueError naming the skill when it does not fit the run."""
+    flat run's ``policy`` and ``normalizer``; returns the skill's content hash (its lineage). Raises ValueError naming
+    the skill when it does not fit the run."""
     from hrlp.skills.library import SkillLibrary, locate_skill, search_roots
 
     assert cfg.init_from is not None
@@ -60,6 +61,7 @@ def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) 
         raise ValueError(f"init_from: skill {skill.name}'s network does not have hidden layers "
                          f"{cfg.hidden}{_trained_with(library, name)}") from None  # fmt: skip
     normalizer.load_state_dict(skill.normalizer.state_dict())
+    return skill.content_hash
 
 
 def _trained_with(library: Any, name: str) -> str:

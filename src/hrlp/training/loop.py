@@ -68,8 +68,10 @@ class Trainer:
         probe.close()
         self.value_net = ValueNet(obs_dim, cfg.hidden)
         self.normalizer = RunningNormalizer(obs_dim)
+        self.init_from_sha256: str | None = None
+        """The content hash of the skill the run started from (``cfg.init_from``), recorded in every checkpoint."""
         if cfg.init_from is not None:
-            warm_start(self.policy, self.normalizer, cfg)
+            self.init_from_sha256 = warm_start(self.policy, self.normalizer, cfg)
         envs = [factory] * cfg.num_envs
         self.sampler: Sampler | ParallelSampler
         self._update_threads: int | None = None
@@ -204,6 +206,8 @@ class Trainer:
         }
         if isinstance(self.policy, GaussianPolicy):
             meta["act_dim"] = int(self.policy.log_std.numel())
+        if self.init_from_sha256 is not None:
+            meta["init_from_sha256"] = self.init_from_sha256
         return tensors, meta
 
     @classmethod
@@ -217,6 +221,8 @@ class Trainer:
         trainer = cls(cfg)
         check_skill_hashes(meta.get("skills", {}), trainer.skill_hashes, directory)
         check_action_units(meta, trainer.action_units, directory)
+        if isinstance(meta.get("init_from_sha256"), str):  # the skill it started from, not the one of that name now
+            trainer.init_from_sha256 = meta["init_from_sha256"]
         load_module("policy", trainer.policy, tensors)
         load_module("value", trainer.value_net, tensors)
         trainer.normalizer.load_state_dict({k.removeprefix("normalizer."): v for k, v in tensors.items()
