@@ -268,6 +268,8 @@ def main() -> None:
     torch.set_num_threads(1)
     skip = set(filter(None, args.skip.split(",")))
     if args.baseline_checkout is not None:
+        if "arm" in skip:
+            raise SystemExit("--baseline-checkout compares the ReachAndGrip2 rows; it cannot go with --skip arm")
         check_checkout(args.baseline_checkout)
 
     from hrlp.config import PAPER_SETTINGS, TrainConfig

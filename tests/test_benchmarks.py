@@ -142,3 +142,7 @@ def test_trpo_speed_refuses_a_baseline_checkout_without_hrlp_before_training(tmp
     assert (
         out.stderr.strip() == f"--baseline-checkout {tmp_path}: not an hrlp checkout (no benchmarks/trpo_speed.py, src/hrlp)"
     )
+
+    out = _run("trpo_speed.py", f"--baseline-checkout {tmp_path} --skip arm", tmp_path)
+    assert out.returncode == 1 and out.stdout == ""
+    assert out.stderr.strip() == "--baseline-checkout compares the ReachAndGrip2 rows; it cannot go with --skip arm"

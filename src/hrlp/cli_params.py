@@ -163,6 +163,6 @@ def skill_ref(param: typer.CallbackParam, value: str | None) -> str | None:
     path = Path(value)
     if (path / "meta.json").is_file():
         return value
-    if path.exists() or "/" in value or value in ("", ".", ".."):
+    if "/" in value or value in ("", ".", ".."):  # a plain name is looked up as a name, whatever lies in the cwd
         raise BoundError(f"{_flag(param)} {value}: neither a skill directory (with meta.json) nor a skill name")
     return value

@@ -311,3 +311,22 @@ def test_init_from_that_cannot_start_the_run_is_one_line_before_anything_is_writ
     r = CliRunner().invoke(app, [command, task, *args, "--steps", "20", "--run-dir", str(tmp_path / "r")])
     assert r.exit_code != 0 and " ".join(r.output.split()) == f"error: {line}", r.output
     assert not (tmp_path / "r").exists()
+
+
+def test_a_run_started_from_a_skill_directory_resumes_after_the_skill_is_gone(tmp_path):
+    import shutil
+
+    from hrlp.skills.library import shipped_library_root
+
+    parent = tmp_path / "mine" / "gripper"
+    shutil.copytree(shipped_library_root() / "gripper", parent)
+    run = tmp_path / "ft"
+    tiny = ["--steps", "20", "--batch-steps", "10", "--num-envs", "2", "--workers", "1", "--episode-steps", "10"]
+    r = CliRunner().invoke(app, ["train", "Gripper", "--init-from", str(parent), *GRIPPER_ARGS, *tiny, "--run-dir", str(run)])
+    assert r.exit_code == 0, r.output
+    sha = read_run_checkpoint(run / "checkpoint")[1]["init_from_sha256"]
+    shutil.rmtree(parent)  # the weights now come from the run's checkpoint; the skill it started from is its lineage
+    more = CliRunner().invoke(app, ["train", "Gripper", "--run-dir", str(run), "--resume", "--steps", "40"])
+    assert more.exit_code == 0, more.output
+    _, meta, cfg = read_run_checkpoint(run / "checkpoint")
+    assert meta["env_steps"] >= 40 and meta["init_from_sha256"] == sha and cfg.init_from == str(parent)

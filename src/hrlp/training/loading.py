@@ -8,7 +8,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -37,6 +37,9 @@ from hrlp.training.environments import (
     run_factory,
 )
 
+if TYPE_CHECKING:
+    from hrlp.skills.library import SkillLibrary
+
 
 def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) -> str:
     """Copy the skill ``cfg.init_from`` (its policy's weights and its observation statistics, thawed) into a fresh
@@ -64,7 +67,7 @@ def warm_start(policy: Policy, normalizer: RunningNormalizer, cfg: TrainConfig) 
     return skill.content_hash
 
 
-def _trained_with(library: Any, name: str) -> str:
+def _trained_with(library: SkillLibrary, name: str) -> str:
     """``"; it was trained ..."``: the task arguments and hidden layers of the skill's own training run, as options to
     give a run that starts from it ("" where its manifest records no training config)."""
     config = (library.manifest(name).get("trained") or {}).get("config") or {}

@@ -55,7 +55,9 @@ class Trainer:
     is 0 (the default) is run with the count :meth:`TrainConfig.resolved` gives, which ``self.cfg`` records.
     """
 
-    def __init__(self, cfg: TrainConfig) -> None:
+    def __init__(self, cfg: TrainConfig, *, from_checkpoint: bool = False) -> None:
+        """``from_checkpoint``: the weights will be loaded from a checkpoint (:meth:`resume`), so ``cfg.init_from`` is
+        not read again (the skill it names may have changed or gone since the run started)."""
         self.cfg = cfg = cfg.resolved()
         factory = run_factory(cfg)  # batched: every world of a process's share in one VectorEnv (build_vector_env)
         torch.manual_seed(cfg.seed)
@@ -70,7 +72,7 @@ class Trainer:
         self.normalizer = RunningNormalizer(obs_dim)
         self.init_from_sha256: str | None = None
         """The content hash of the skill the run started from (``cfg.init_from``), recorded in every checkpoint."""
-        if cfg.init_from is not None:
+        if cfg.init_from is not None and not from_checkpoint:
             self.init_from_sha256 = warm_start(self.policy, self.normalizer, cfg)
         envs = [factory] * cfg.num_envs
         self.sampler: Sampler | ParallelSampler
@@ -218,10 +220,10 @@ class Trainer:
         numbers as an uninterrupted one. Other Gymnasium environments restart their episodes.
         """
         tensors, meta, cfg = read_run_checkpoint(directory, {"sampler": dict})
-        trainer = cls(cfg)
+        trainer = cls(cfg, from_checkpoint=True)
         check_skill_hashes(meta.get("skills", {}), trainer.skill_hashes, directory)
         check_action_units(meta, trainer.action_units, directory)
-        if isinstance(meta.get("init_from_sha256"), str):  # the skill it started from, not the one of that name now
+        if isinstance(meta.get("init_from_sha256"), str):  # the skill it started from
             trainer.init_from_sha256 = meta["init_from_sha256"]
         load_module("policy", trainer.policy, tensors)
         load_module("value", trainer.value_net, tensors)
