@@ -74,7 +74,7 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
                for p in PRESETS.values() if "handover" not in p.name
                and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated", "reach-and-grip-1-imitated",
                                  "reach-and-grip-1-claw", "reach-and-grip-2-claw", "reach-and-grip-2-clearance",
-                                 "reach-and-move-imitated",
+                                 "reach-and-grip-2-chained", "reach-and-move-imitated",
                                  "reach-and-move-chained") for r in p.runs)  # fmt: skip
     # The imitated grid is the reacher-handover grid and the tuned gripper + micro cells with gripper-imitated in place
     # of the gripper, and nothing else.
@@ -119,6 +119,15 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
             s.replace("gripper-claw", "gripper-clearance") for s in other.config.macro.skills
         )
         assert replace(r.config, macro=replace(r.config.macro, skills=other.config.macro.skills)) == other.config, r.name
+        assert r.paper == other.paper, r.name
+    # The chained grid is the clearance grid's gripper + reacher cells with initiation sets and pre-grasp goals added.
+    chained = PRESETS["reach-and-grip-2-chained"].runs
+    plain = [r for r in clearance if r.name.startswith("gripper-clearance+reacher-handover,")]
+    assert [r.name for r in chained] == [r.name + ",chained" for r in plain] and len(chained) == 4
+    for r, other in zip(chained, plain, strict=True):
+        h = r.config.macro.handover
+        assert h.initiation and h.pregrasp and replace(h, initiation=False, pregrasp=False) == other.config.macro.handover
+        assert replace(r.config, macro=replace(r.config.macro, handover=other.config.macro.handover)) == other.config
         assert r.paper == other.paper, r.name
     # reach-and-move with the imitated skills: reach (capsule-relative goals, the Reacher's own claw), grip, carry (the
     # Mover's target a world point), with the headline's Manager settings; TargetDistSum beside the paper's best pair.

@@ -162,6 +162,23 @@ def _figure_7_with(gripper: str, s_reacher: bool = False) -> tuple[Run, ...]:
     )
 
 
+def _figure_7_chained(gripper: str) -> tuple[Run, ...]:
+    """Figure 7's gripper + reacher cells with ``gripper`` and reacher-handover (run as trained) chained: initiation sets
+    and pre-grasp goals (:class:`~hrlp.skills.macro_env.Handover`), so that the Gripper runs only from the states it was
+    trained from (or goes on where it has taken the arm), the headline's Manager settings."""
+    base = _swap(_relative_only(_tuned_manager(("gripper", "reacher"), False), "reacher-handover"), "gripper", gripper)
+    assert base.macro is not None
+    handover = Handover(approach_height=0.0, open_torque=0.0, initiation=True, pregrasp=True)
+    return tuple(
+        Run(
+            f"{gripper}+reacher-handover,c2={c2},tr={tr},chained",
+            replace(base, task_kwargs={"c2": c2, "tr": tr}, macro=replace(base.macro, handover=handover)),
+            paper,
+        )
+        for (c2, tr), paper in _FIG7["gripper+reacher"].items()
+    )
+
+
 def _target_relative(config: TrainConfig) -> TrainConfig:
     """A hand-over Manager's config whose Mover targets are offsets from the task's target T (``Handover.target_relative``)."""
     assert config.macro is not None and config.macro.handover is not None
@@ -564,6 +581,16 @@ PRESETS: dict[str, Preset] = {
             "in place of gripper-claw; paper: its figure for the same set with its own skills",
             "Section 4.3.1, Figure 7",
             _figure_7_with("gripper-clearance", s_reacher=True),
+            budget=3_000_000,
+        ),
+        Preset(
+            "reach-and-grip-2-chained",
+            "Figure 7's gripper + reacher cells (Experiment 2, k = 15) with gripper-clearance and reacher-handover chained "
+            "as reach-and-move-chained chains its skills: initiation sets (a Gripper chosen while the palm is out of its "
+            "9 cm runs the Reacher) and pre-grasp goals (3 cm aside, 0-8 cm above the capsule), the headline's Manager "
+            "settings; paper: its figure for gripper + reacher with its own skills",
+            "Section 4.3.1, Figure 7; Appendix C (hand-over states)",
+            _figure_7_chained("gripper-clearance"),
             budget=3_000_000,
         ),
         Preset(
