@@ -2,14 +2,17 @@
 
 Collects ``--states`` hand-over states of the Manager run ``MANAGER`` to its Gripper (``--gripper``, default the Manager's
 one skill named ``gripper*``; the Manager samples
-its actions, as in training: :func:`hrlp.skills.dagger.collect_handover_states`) into three start banks under ``--out``:
+its actions, as in training: :func:`hrlp.skills.dagger.collect_handover_states`) into four start banks under ``--out``:
 
 - ``all``: every hand-over;
 - ``not_held``: those where the capsule is not yet held (Definition 1 false; a Manager often calls the Gripper again
   while it holds the capsule, and those episodes start as successes);
 - ``initiation_not_held``: those also inside the Gripper's initiation set (``Skill.initiation``: the hand within the
   training starts' 9 cm of the capsule, the capsule resting), the states a Manager with ``Handover(initiation=True)``
-  may hand over from.
+  may hand over from;
+- ``switch_not_held``: those of ``not_held`` at which control passes to the Gripper (the episode's first decision or one
+  after another macro-action ran): the others continue a Gripper the Manager chose before, from wherever its own steps
+  took the arm, often after it has pushed the capsule away.
 
 Then evaluates each skill of ``--skills`` (default: the Gripper the Manager used) greedily, ``--episodes`` episodes of
 ``--steps`` control steps (the Gripper recipes' 100) from each bank, from the Gripper's own start set
@@ -61,7 +64,7 @@ def success(skill: Skill, task_kwargs: dict[str, Any], episodes: int, steps: int
 
 
 def banks(manager: Path, gripper: Skill, states: int, out: Path) -> dict[str, Path]:
-    """Collect the three hand-over banks (module docstring) into ``out``; returns their paths."""
+    """Collect the four hand-over banks (module docstring) into ``out``; returns their paths."""
     held = SparseSuccess()
 
     def in_set(p: ArmPhysics) -> bool:
@@ -69,10 +72,17 @@ def banks(manager: Path, gripper: Skill, states: int, out: Path) -> dict[str, Pa
         obs[0, 18:21], obs[0, 21:24] = p.hand, p.capsule
         return bool(gripper.initiation.holds(obs)[0])
 
-    filters = {"all": None, "not_held": lambda p: not held(p), "initiation_not_held": lambda p: in_set(p) and not held(p)}
+    filters = {
+        "all": (None, False),
+        "not_held": (lambda p: not held(p), False),
+        "initiation_not_held": (lambda p: in_set(p) and not held(p), False),
+        "switch_not_held": (lambda p: not held(p), True),
+    }
     paths = {}
-    for name, keep in filters.items():
-        qpos, qvel, episodes, refused = collect_handover_states(manager, gripper.name, states, seed=1, keep=keep)
+    for name, (keep, switches_only) in filters.items():
+        qpos, qvel, episodes, refused = collect_handover_states(
+            manager, gripper.name, states, seed=1, keep=keep, switches_only=switches_only
+        )
         paths[name] = write_start_bank(out / f"{name}.npz", {HANDOVER_BANK: (qpos, qvel)},
                                        {"manager_run": str(manager), "filter": name})  # fmt: skip
         print(f"bank {name}: {len(qpos)} hand-over states from {episodes} Manager episodes ({refused} refused)", flush=True)

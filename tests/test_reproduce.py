@@ -2,6 +2,7 @@
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -292,3 +293,9 @@ def test_only_runs_the_runs_whose_names_match_and_a_pattern_that_matches_nothing
         reproduce(_tiny(), tmp_path, workers=1, only=("normal", "stab"))
     r = CliRunner().invoke(app, ["reproduce", "reach-and-grip-2", "--out", str(tmp_path), "--only", "gripper+nothing*"])
     assert r.exit_code == 2 and "--only 'gripper+nothing*' matches no run of reach-and-grip-2" in r.output, r.output
+
+
+def test_docs_reproduce_lists_every_preset():
+    text = (Path(__file__).resolve().parents[1] / "docs" / "reproduce.md").read_text()
+    missing = [name for name in PRESETS if f"`{name}`" not in text]
+    assert not missing, f"docs/reproduce.md does not list the presets {missing}"

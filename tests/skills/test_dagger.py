@@ -13,7 +13,7 @@ from hrlp.skills import SkillLibrary, load_skill
 from hrlp.skills.dagger import DaggerConfig, collect_handover_states, graspable, run_round
 from hrlp.skills.macro_env import Handover, MacroSpec
 from hrlp.skills.starts import write_start_bank
-from hrlp.train import TrainConfig, Trainer, train
+from hrlp.train import TrainConfig, Trainer, load_trained, train
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +39,24 @@ def test_collected_states_are_where_the_manager_chose_the_skill_and_gripper_epis
         assert np.abs(qpos.astype(np.float32) - d.qpos.astype(np.float32)).max(axis=1).min() < 1e-6
     with pytest.raises(ValueError, match="no skill 'mover'"):
         collect_handover_states(manager_run, "mover", 5)
+
+
+def test_switches_only_keeps_the_decisions_at_which_control_passes_to_the_skill(manager_run):
+    every = collect_handover_states(manager_run, "gripper", 120, seed=3)[0]
+    switches, _, episodes, refused = collect_handover_states(manager_run, "gripper", 10, seed=3, switches_only=True)
+    assert refused == 0 and episodes >= 1
+    rows = {q.tobytes() for q in every}
+    assert all(q.tobytes() in rows for q in switches)  # the same episodes, fewer of their decisions
+    assert not np.array_equal(switches, every[: len(switches)])  # the Manager chose the Gripper twice in a row somewhere
+    trained = load_trained(manager_run)
+    env = trained.make_env()
+    env.reset(seed=0)
+    assert env.ran_last == -1
+    blocks = [np.zeros(d) for d in env.param_dims]
+    env.step((1, *blocks))
+    assert env.ran_last == 1
+    env.reset(seed=0)
+    assert env.ran_last == -1
 
 
 def test_the_graspable_filter_keeps_only_close_states_with_the_capsule_at_rest(manager_run):

@@ -110,11 +110,14 @@ def collect_handover_states(
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
     keep: Callable[[ArmPhysics], bool] | None = None,
+    switches_only: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Physics states ``(qpos [states, nq], qvel [states, nv])`` at which the Manager of ``manager_run``, sampling
     its actions, ran ``skill`` (its choice, or under initiation sets the skill the choice ran) and, with ``keep``, for
     which ``keep(physics)`` holds (e.g. :func:`graspable`), the number of episodes it took and the number of hand-overs
-    ``keep`` refused. Raises ValueError if the Manager has no
+    ``keep`` refused. With ``switches_only`` only the decisions at which control passes to ``skill`` count: the
+    episode's first decision, or one after a decision that ran another macro-action (a Manager choosing the same skill
+    again continues it from wherever its own steps took the arm). Raises ValueError if the Manager has no
     such skill or never chooses it (or no state is kept) in 200 episodes."""
     from hrlp.train import load_trained
 
@@ -138,7 +141,8 @@ def collect_handover_states(
         episodes += 1
         while True:
             action = trained.act(env, obs, gen, deterministic=False)
-            if env.would_run(int(action[0])) == index and len(qpos) < states:  # the skill run (initiation sets)
+            switch = env.ran_last != index or not switches_only
+            if env.would_run(int(action[0])) == index and switch and len(qpos) < states:  # the skill run (initiation sets)
                 if keep is not None and not keep(physics):
                     refused += 1
                 else:

@@ -222,6 +222,11 @@ class MacroEnv(gym.Env):
         state = self._obs if obs is None else np.asarray(obs, dtype=np.float64)
         return self.param_specs[choice].origin(state.reshape(1, -1))[0]
 
+    @property
+    def ran_last(self) -> int:
+        """The macro-action the previous decision of this episode ran (-1 before the episode's first decision)."""
+        return self._ran
+
     def would_run(self, choice: int) -> int:
         """The macro-action that ``choice`` runs from the current state: itself, or under initiation sets
         (:attr:`Handover.initiation`) the one :func:`initiated` picks."""
