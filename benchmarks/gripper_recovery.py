@@ -9,7 +9,10 @@ episode). Writes them as a start bank (``write_start_bank``; ``GripperTask(start
 share F of its episodes from it: ``hrlp train Gripper --task-arg starts=BANK --task-arg starts_fraction=F``) and prints
 how often the skill pushed, and how often it gripped all the same after a push.
 
-    python benchmarks/gripper_recovery.py --skill gripper-clearance --episodes 3000 --out runs/recovery.npz
+    python benchmarks/gripper_recovery.py --out runs/recovery.npz
+
+With its defaults it writes the bank shipped as ``src/hrlp/envs/assets/gripper_recovery_starts.npz``
+(``GripperTask(starts="recovery")``, on which the shipped ``gripper-recovery`` was trained).
 
 An existing ``--out`` is never replaced.
 """
@@ -38,7 +41,7 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=3000)
     ap.add_argument("--steps", type=int, default=100, help="control steps per episode (the Gripper recipes' 100)")
     ap.add_argument("--first-seed", type=int, default=20_000)
-    ap.add_argument("--push", type=float, default=0.02, help="capsule displacement that counts as a push, metres")
+    ap.add_argument("--push", type=float, default=0.03, help="capsule displacement that counts as a push, metres")
     ap.add_argument("--every", type=int, default=5, help="steps between the states recorded after a push")
     ap.add_argument("--per-episode", type=int, default=4, help="most states recorded per episode")
     ap.add_argument("--out", type=Path, required=True, help="the start bank to write (.npz)")
@@ -86,7 +89,8 @@ def main() -> None:
     if not qpos:
         sys.exit("gripper_recovery: no push in these episodes; nothing written")
     write_start_bank(args.out, {HANDOVER_BANK: (np.stack(qpos), np.stack(qvel))},
-                     {"skill": args.skill, "source": "gripper_recovery", "push": str(args.push)})  # fmt: skip
+                     {"skill": args.skill, "skill_sha256": skill.content_hash, "source": "gripper_recovery",
+                      "push": str(args.push), "episodes": str(args.episodes), "first_seed": str(args.first_seed)})  # fmt: skip
     print(f"wrote {len(qpos)} states to {args.out}")
 
 

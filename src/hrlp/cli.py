@@ -1276,6 +1276,13 @@ def dagger(
             callback=check.real(0.0, 100.0, low_open=True),
         ),
     ] = None,
+    switches_only: Annotated[
+        bool,
+        typer.Option(
+            "--switches-only",
+            help="Keep only the decisions at which control passes to SKILL, not those continuing its own run.",
+        ),
+    ] = False,
 ) -> None:
     """One DAgger round (Appendix C): collect the states where MANAGER_RUN calls SKILL, retrain the skill from them
     (warm-started), freeze it under a new name with its lineage, retrain the Manager with it, compare old and new."""
@@ -1283,7 +1290,7 @@ def dagger(
 
     cfg = DaggerConfig(str(manager_run), skill, name or f"{skill}-dagger", None if library is None else str(library),
                        states, skill_steps, starts_fraction, manager_steps, workers, episodes, seed, max_hand_distance,
-                       max_capsule_speed)  # fmt: skip
+                       max_capsule_speed, switches_only)  # fmt: skip
     res = run_round(cfg, out or manager_run.with_name(manager_run.name + "-dagger"), err_console)  # errors: one line
 
     def cell(d: dict[str, Any]) -> str:

@@ -109,8 +109,10 @@ def test_a_warm_started_run_begins_as_the_skill_acts():
 def test_a_round_retrains_freezes_with_lineage_retrains_the_manager_and_resumes(manager_run, tmp_path):
     library = tmp_path / "lib"
     cfg = DaggerConfig(str(manager_run), "gripper", "gripper-d1", str(library), states=16, skill_steps=1_000,
-                       manager_steps=400, workers=1, eval_episodes=2)  # fmt: skip
+                       manager_steps=400, workers=1, eval_episodes=2, switches_only=True)  # fmt: skip
     res = run_round(cfg, tmp_path / "round")
+    with np.load(tmp_path / "round" / "starts.npz") as bank:  # the collection's settings travel with the states
+        assert str(bank["meta_switches_only"]) == "True" and str(bank["meta_skill"]) == "gripper"
     lib = SkillLibrary(library)
     new, parent = lib.load("gripper-d1"), load_skill("gripper")
     lineage = lib.manifest("gripper-d1")["lineage"]
@@ -130,7 +132,7 @@ def test_a_round_retrains_freezes_with_lineage_retrains_the_manager_and_resumes(
     run_round(cfg, tmp_path / "round")
     assert (tmp_path / "round" / "skill" / "checkpoint").stat().st_mtime_ns == stamp
     r = CliRunner().invoke(app, ["dagger", str(manager_run), "--name", "gripper-d1", "--library", str(library),
-                                 "--out", str(tmp_path / "other")])  # fmt: skip
+                                 "--out", str(tmp_path / "other"), "--switches-only"])  # fmt: skip
     assert r.exit_code == 2 and "already exists" in r.output
 
 
@@ -145,3 +147,5 @@ def test_dagger_settings_are_checked():
         DaggerConfig("m", "gripper", "g2", max_hand_distance=0.0)
     with pytest.raises(ValueError, match="max_capsule_speed must be a positive number"):
         DaggerConfig("m", "gripper", "g2", max_capsule_speed=float("nan"))
+    with pytest.raises(ValueError, match="switches_only must be true or false"):
+        DaggerConfig("m", "gripper", "g2", switches_only="yes")

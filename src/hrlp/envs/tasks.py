@@ -416,6 +416,22 @@ def start_bank(path: str, name: str = HANDOVER_BANK) -> tuple[np.ndarray, np.nda
     return qpos, qvel
 
 
+#: Where ``GripperTask(starts="recovery")`` draws its bank from: states just after ``gripper-clearance``'s own greedy
+#: episodes pushed the capsule more than 3 cm (``python benchmarks/gripper_recovery.py`` writes it).
+GRIPPER_RECOVERY_STARTS_FILE = "assets/gripper_recovery_starts.npz"
+#: The start banks shipped with hrlp, by the name ``GripperTask.starts`` takes for them.
+GRIPPER_BANKS = {"recovery": GRIPPER_RECOVERY_STARTS_FILE}
+
+
+def gripper_start_bank(starts: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`start_bank` of ``starts``: a shipped bank's name (:data:`GRIPPER_BANKS`) or the path of a bank."""
+    if starts in GRIPPER_BANKS:
+        from importlib import resources
+
+        return start_bank(str(resources.files("hrlp.envs").joinpath(GRIPPER_BANKS[starts])))
+    return start_bank(starts)
+
+
 @dataclass(frozen=True)
 class GripperTask(Task):
     """Gripper (Section 4.1, Experiment 1): grip the capsule with the palm starting close to it.
@@ -429,7 +445,8 @@ class GripperTask(Task):
     paper's "many close positions" (Section 4.1).
     With ``starts``, a share ``starts_fraction`` of the episodes begins instead from a physics state of a start
     bank (an ``.npz`` written by :func:`hrlp.skills.starts.write_start_bank`, read without pickle): the states at
-    which a Manager handed over to the Gripper (``hrlp dagger``, the paper's Appendix C).
+    which a Manager handed over to the Gripper (``hrlp dagger``, the paper's Appendix C), or the shipped bank
+    ``"recovery"``: states just after a Gripper pushed the capsule away, from which it must still grip.
     Reward: :class:`GripReward`. Success: :class:`SparseSuccess` (Definition 1).
     """
 
@@ -438,7 +455,8 @@ class GripperTask(Task):
     sparse: SparseSuccess = SparseSuccess()
     """Definition 1 thresholds."""
     starts: str | None = None
-    """Path of a start bank (its ``handover_qpos``/``handover_qvel`` arrays), or None for the task's own starts only."""
+    """Path of a start bank (its ``handover_qpos``/``handover_qvel`` arrays), a shipped bank's name (``"recovery"``,
+    :data:`GRIPPER_BANKS`), or None for the task's own starts only."""
     starts_fraction: float = 1.0
     """With ``starts``, the share of episodes that begin from the bank (the rest from the task's own start set)."""
     angle_range: float = math.pi
@@ -514,12 +532,12 @@ class GripperTask(Task):
         if not (isinstance(self.starts_fraction, int | float) and 0 <= self.starts_fraction <= 1):
             raise ValueError(f"GripperTask.starts_fraction must be in [0, 1], got {self.starts_fraction!r}")
         if self.starts is not None:
-            start_bank(str(self.starts))  # a missing or malformed bank fails here, when the task is made
+            gripper_start_bank(str(self.starts))  # a missing or malformed bank fails here, when the task is made
 
     def reset(self, physics: ArmPhysics, rng: np.random.Generator, episode: int) -> None:
         _hide_target(physics)
         if self.starts is not None and rng.uniform() < self.starts_fraction:
-            qpos, qvel = start_bank(str(self.starts))
+            qpos, qvel = gripper_start_bank(str(self.starts))
             i = int(rng.integers(len(qpos)))
             physics.set_state_vectors(qpos[i], qvel[i])
             physics.forward()

@@ -305,6 +305,7 @@ def _shipped_skills() -> Preset:
     claw = TrainConfig(task="Gripper", workers=1, backend="batched", batch_steps=25_000, episode_steps=100,
                        hidden=(256, 256), init_log_std=-2.0,
                        task_kwargs={**gripper.task_kwargs, "observe_capsule": True, "observe_claw": True})  # fmt: skip
+    clearance = replace(claw, task_kwargs={**claw.task_kwargs, "observe_clearance": True})
     return Preset(
         "shipped-skills",
         "the shipped skills: Reacher; Gripper from many close, open-claw starts (c3 -8 and a bonus c4 10 while gripped: "
@@ -312,7 +313,8 @@ def _shipped_skills() -> Preset:
         "goal near the table is reached); the Movers from grip starts (scripts/make_mover_starts.py records them from "
         "the Gripper); a Reacher trained for hand-over (ReacherHandover: pre-grasp goals above the capsule, the capsule left "
         "in place, the claw open); a Gripper seeing the capsule's pose, imitated from the scripted grasp, then TRPO, and one "
-        "also seeing the arm's distances to the capsule, imitated from the grasp that escapes tight starts; a "
+        "also seeing the arm's distances to the capsule, imitated from the grasp that escapes tight starts, then trained on "
+        "from the states just after it pushed the capsule away; a "
         "Mover from held starts (the capsule in that Gripper's claw); docs/skills.md",
         "Section 4.1",
         (
@@ -339,8 +341,12 @@ def _shipped_skills() -> Preset:
             Run("gripper-claw", claw, steps=8_000_000, skill=("gripper-claw", 15), imitation=CLAW_GRIPPER),
             # gripper-claw's run that also sees each arm body's distance to the capsule (observe_clearance), imitated
             # from the escaping expert with five times the data (CLEARANCE_GRIPPER), then the same TRPO.
-            Run("gripper-clearance", replace(claw, task_kwargs={**claw.task_kwargs, "observe_clearance": True}),
-                steps=8_000_000, skill=("gripper-clearance", 15), imitation=CLEARANCE_GRIPPER),
+            Run("gripper-clearance", clearance, steps=8_000_000, skill=("gripper-clearance", 15), imitation=CLEARANCE_GRIPPER),
+            # gripper-clearance trained on (warm-started from its weights and statistics), 30% of its episodes from the
+            # shipped recovery bank (states just after gripper-clearance pushed the capsule away), the same settings.
+            Run("gripper-recovery", replace(clearance, init_from="gripper-clearance", task_kwargs={
+                **clearance.task_kwargs, "starts": "recovery", "starts_fraction": 0.3}), steps=8_000_000,
+                skill=("gripper-recovery", 15)),
             # MoverNoised's recipe from the held starts (the capsule in gripper-imitated's claw): a Mover that carries what
             # the Gripper gripped, one process on the batched backend.
             Run("mover-held", replace(_flat("MoverNoised", 25_000, episode_steps=100, init_log_std=-1.0), workers=1,

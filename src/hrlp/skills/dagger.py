@@ -73,6 +73,9 @@ class DaggerConfig:
     """Keep only hand-over states with d(H, C) at most this, metres (None: every state the Manager hands over at)."""
     max_capsule_speed: float | None = None
     """Keep only hand-over states whose capsule moves slower than this across the table, m/s (None: any speed)."""
+    switches_only: bool = False
+    """Keep only the decisions at which control passes to the skill (the episode's first decision or one after another
+    macro-action), not those at which the Manager chooses the skill again to continue its own run."""
 
     def __post_init__(self) -> None:
         for name in ("max_hand_distance", "max_capsule_speed"):
@@ -87,6 +90,8 @@ class DaggerConfig:
             raise ValueError(f"dagger: manager_steps must be a positive integer, got {self.manager_steps!r}")
         if not (isinstance(self.starts_fraction, int | float) and 0 < self.starts_fraction <= 1):
             raise ValueError(f"dagger: starts_fraction must be in (0, 1], got {self.starts_fraction!r}")
+        if not isinstance(self.switches_only, bool):
+            raise ValueError(f"dagger: switches_only must be true or false, got {self.switches_only!r}")
         if self.name == self.skill:
             raise ValueError(f"dagger: the retrained skill needs a new name, not {self.skill!r}")
 
@@ -207,10 +212,12 @@ def run_round(cfg: DaggerConfig, out_dir: Path, console: Any = None) -> dict[str
         if cfg.max_hand_distance is not None or cfg.max_capsule_speed is not None:
             keep = functools.partial(graspable, max_hand_distance=cfg.max_hand_distance,
                                      max_capsule_speed=cfg.max_capsule_speed)  # fmt: skip
-        qpos, qvel, episodes, refused = collect_handover_states(manager_run, cfg.skill, cfg.states, cfg.seed, keep=keep)
+        qpos, qvel, episodes, refused = collect_handover_states(
+            manager_run, cfg.skill, cfg.states, cfg.seed, keep=keep, switches_only=cfg.switches_only
+        )
         meta = {"manager_run": str(manager_run), "skill": cfg.skill, "skill_sha256": parent.content_hash,
                 "episodes": str(episodes), "refused": str(refused), "max_hand_distance": str(cfg.max_hand_distance),
-                "max_capsule_speed": str(cfg.max_capsule_speed)}  # fmt: skip
+                "max_capsule_speed": str(cfg.max_capsule_speed), "switches_only": str(cfg.switches_only)}  # fmt: skip
         write_start_bank(bank, {HANDOVER_BANK: (qpos, qvel)}, meta)
         refusals = f" ({refused} hand-overs refused by the filter)" if keep is not None else ""
         console.print(f"{len(qpos)} states from {episodes} episodes{refusals} -> {bank}")
