@@ -88,7 +88,7 @@ def test_gripper_variants_retrains_the_shipped_gripper_and_reports_both_start_se
     assert again.returncode == 2 and "exists" in again.stderr
 
 
-def test_gripper_handover_collects_three_banks_and_evaluates_every_start_set(tmp_path):
+def test_gripper_handover_collects_four_banks_and_evaluates_every_start_set(tmp_path):
     manager = subprocess.run(["hrlp", "train-manager", "ReachAndGrip2", "--skills", "gripper-imitated,reacher-handover",
                               "--steps", "200", "--batch-steps", "20", "--num-envs", "2", "--workers", "1", "--run-dir",
                               str(tmp_path / "m")], capture_output=True, text=True, timeout=300)  # fmt: skip
@@ -97,8 +97,8 @@ def test_gripper_handover_collects_three_banks_and_evaluates_every_start_set(tmp
     out = _run("gripper_handover.py", args, tmp_path)
     assert out.returncode == 0, out.stderr[-2000:]
     results = __import__("json").loads((tmp_path / "gh" / "results.json").read_text())
-    assert set(results["gripper-imitated"]) == {"own", "paper", "all", "not_held", "initiation_not_held"}
-    for bank in ("all", "not_held", "initiation_not_held"):
+    assert set(results["gripper-imitated"]) == {"own", "paper", "all", "not_held", "initiation_not_held", "switch_not_held"}
+    for bank in ("all", "not_held", "initiation_not_held", "switch_not_held"):
         assert f"bank {bank}: 2 hand-over states" in out.stdout and (tmp_path / "gh" / f"{bank}.npz").is_file()
     from hrlp.envs import make
     from hrlp.envs.tasks import SparseSuccess, start_bank
@@ -114,6 +114,25 @@ def test_gripper_handover_collects_three_banks_and_evaluates_every_start_set(tmp
         assert initiation.holds(np.concatenate([np.zeros(18), physics.hand, physics.capsule])[None])[0]
     again = _run("gripper_handover.py", args, tmp_path)
     assert again.returncode == 2 and "exists" in again.stderr
+
+
+def test_gripper_recovery_writes_the_first_states_of_the_shipped_recovery_bank(tmp_path):
+    from importlib import resources
+
+    from hrlp.envs.tasks import GRIPPER_RECOVERY_STARTS_FILE, gripper_start_bank, start_bank
+    from hrlp.skills import SkillLibrary, shipped_library_root
+
+    out = _run("gripper_recovery.py", f"--episodes 60 --out {tmp_path / 'b.npz'}", tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    qpos, qvel = start_bank(str(tmp_path / "b.npz"))
+    shipped_qpos, shipped_qvel = gripper_start_bank("recovery")
+    assert 0 < len(qpos) < len(shipped_qpos)  # the defaults' first 60 episodes: a prefix of the shipped bank's 3,000
+    np.testing.assert_array_equal(qpos, shipped_qpos[: len(qpos)])
+    np.testing.assert_array_equal(qvel, shipped_qvel[: len(qvel)])
+    with np.load(resources.files("hrlp.envs").joinpath(GRIPPER_RECOVERY_STARTS_FILE)) as z:  # recorded from this skill
+        assert str(z["meta_skill_sha256"]) == SkillLibrary(shipped_library_root()).load("gripper-clearance").content_hash
+    again = _run("gripper_recovery.py", f"--episodes 1 --out {tmp_path / 'b.npz'}", tmp_path)
+    assert again.returncode != 0 and "exists" in again.stderr
 
 
 @pytest.mark.parametrize("clearance", [False, True], ids=["escape", "escape-and-clearance"])

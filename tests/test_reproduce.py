@@ -75,7 +75,7 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
                for p in PRESETS.values() if "handover" not in p.name
                and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated", "reach-and-grip-1-imitated",
                                  "reach-and-grip-1-claw", "reach-and-grip-2-claw", "reach-and-grip-2-clearance",
-                                 "reach-and-grip-2-chained", "reach-and-move-imitated",
+                                 "reach-and-grip-2-chained", "reach-and-grip-2-chained-recovery", "reach-and-move-imitated",
                                  "reach-and-move-chained") for r in p.runs)  # fmt: skip
     # The imitated grid is the reacher-handover grid and the tuned gripper + micro cells with gripper-imitated in place
     # of the gripper, and nothing else.
@@ -129,6 +129,13 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
         h = r.config.macro.handover
         assert h.initiation and h.pregrasp and replace(h, initiation=False, pregrasp=False) == other.config.macro.handover
         assert replace(r.config, macro=replace(r.config.macro, handover=other.config.macro.handover)) == other.config
+        assert r.paper == other.paper, r.name
+    # ... and with gripper-recovery in gripper-clearance's place, nothing else changed.
+    recovery = PRESETS["reach-and-grip-2-chained-recovery"].runs
+    assert [r.name for r in recovery] == [r.name.replace("gripper-clearance", "gripper-recovery") for r in chained]
+    for r, other in zip(recovery, chained, strict=True):
+        assert r.config.macro.skills == ("gripper-recovery", "reacher-handover"), r.name
+        assert replace(r.config, macro=replace(r.config.macro, skills=other.config.macro.skills)) == other.config, r.name
         assert r.paper == other.paper, r.name
     # reach-and-move with the imitated skills: reach (capsule-relative goals, the Reacher's own claw), grip, carry (the
     # Mover's target a world point), with the headline's Manager settings; TargetDistSum beside the paper's best pair.

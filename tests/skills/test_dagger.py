@@ -82,6 +82,17 @@ def test_the_graspable_filter_keeps_only_close_states_with_the_capsule_at_rest(m
     assert not graspable(physics, None, 0.1) and graspable(physics, None, 1.0) and graspable(physics, None, None)
 
 
+def test_the_shipped_recovery_bank_is_a_start_set_by_name():
+    from hrlp.envs.tasks import gripper_start_bank
+
+    qpos, _ = gripper_start_bank("recovery")
+    env = make("Gripper", starts="recovery", starts_fraction=1.0)
+    for seed in range(3):
+        env.reset(seed=seed)
+        d = env.unwrapped.physics.data
+        assert np.abs(qpos.astype(np.float32) - d.qpos.astype(np.float32)).max(axis=1).min() < 1e-6
+
+
 def test_bad_start_banks_are_refused_when_the_task_is_made(tmp_path):
     with pytest.raises(ValueError, match=r"start bank .*nope\.npz"):
         make("Gripper", starts=str(tmp_path / "nope.npz"))
