@@ -306,3 +306,11 @@ def test_docs_reproduce_lists_every_preset():
     text = (Path(__file__).resolve().parents[1] / "docs" / "reproduce.md").read_text()
     missing = [name for name in PRESETS if f"`{name}`" not in text]
     assert not missing, f"docs/reproduce.md does not list the presets {missing}"
+
+
+def test_a_run_with_a_seed_offset_trains_each_seed_plus_it_in_the_seed_s_directory(tmp_path):
+    cfg = TrainConfig(task="Reacher")
+    preset = Preset("p", "", "", (Run("a", cfg), Run("b", cfg, seed_offset=200)), seeds=(0, 1))
+    jobs = {(j.run, j.seed): j for j in plan(preset, tmp_path)}
+    assert [jobs["a", s].config.seed for s in (0, 1)] == [0, 1] and [jobs["b", s].config.seed for s in (0, 1)] == [200, 201]
+    assert jobs["b", 1].run_dir == tmp_path / "p" / "b" / "s1"

@@ -18,6 +18,7 @@ from hrlp.evaluate import evaluate_run, mean_interval, wilson_interval
 from hrlp.rollout import Sampler
 from hrlp.skills.macro_env import MacroSpec
 from hrlp.train import TrainConfig, Trainer, env_factory, load_policy, load_trained, train
+from hrlp.training.loop import batch_values
 
 TINY = {"steps": 400, "batch_steps": 200, "num_envs": 4, "episode_steps": 30}
 
@@ -163,6 +164,34 @@ def test_truncated_steps_bootstrap_from_the_real_final_observation():
     # After a reset the next step's input is the new episode's first observation, not the final one.
     assert not torch.equal(batch.next_obs[4], batch.obs[5])
     assert torch.equal(batch.next_obs[3], batch.obs[4])
+
+
+def test_batch_values_run_the_baseline_on_next_observations_only_where_episodes_end():
+    factory = env_factory("Reacher", episode_steps=5)
+    trainer = Trainer(TrainConfig(task="Reacher", num_envs=2, batch_steps=20, steps=20))
+    torch.nn.init.normal_(trainer.value_net.net[-1].weight)  # a baseline that is not zero everywhere
+    sampler = Sampler([factory, factory], trainer.policy, trainer.normalizer, seed=0)
+    batch, _ = sampler.collect(12)  # episodes end at steps 4 and 9; the batch at 11
+    T, N, D = batch.obs.shape
+    rows: list[int] = []
+    net = trainer.value_net
+
+    def counting(x: torch.Tensor) -> torch.Tensor:
+        rows.append(x.shape[0])
+        return net(x)
+
+    values, next_values = batch_values(counting, batch)
+    with torch.no_grad():
+        assert torch.equal(values, net(batch.obs.reshape(T * N, D)).reshape(T, N))
+        two_passes = net(batch.next_obs.reshape(T * N, D)).reshape(T, N)
+    assert torch.allclose(next_values, two_passes, rtol=0, atol=1e-6) and not torch.equal(next_values[4], values[5])
+    assert rows == [T * N, 3 * N]  # the batch, then the next observations of steps 4, 9 and 11 only
+    # An environment whose next observation is not the next step's input: the second pass over every step.
+    rows.clear()
+    moved = dataclasses.replace(batch, next_obs=batch.next_obs + 1.0)
+    _, next_moved = batch_values(counting, moved)
+    with torch.no_grad():
+        assert torch.equal(next_moved, net(moved.next_obs.reshape(T * N, D)).reshape(T, N)) and rows == [T * N, T * N]
 
 
 @pytest.mark.parametrize(

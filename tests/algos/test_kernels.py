@@ -158,37 +158,48 @@ def test_max_step_length_known_answer():
 
 
 def _quadratic_problem(x0: float, optimum: float):
+    """``x``, and the line search's ``evaluate_fn``: surrogate ``-(x - optimum)^2``, KL ``(x - x0)^2 / 2``."""
     x = t([x0])
-    return x, (lambda: -((x - optimum) ** 2).sum()), (lambda: 0.5 * ((x - x0) ** 2).sum())
+    return x, lambda: (-((x - optimum) ** 2).sum(), 0.5 * ((x - x0) ** 2).sum())
 
 
 def test_line_search_accepts_full_step_on_quadratic():
-    x, surrogate, kl = _quadratic_problem(0.0, 1.0)
-    res = backtracking_line_search([x], surrogate, kl, t([1.0]), max_kl=1.0)
+    x, evaluate = _quadratic_problem(0.0, 1.0)
+    res = backtracking_line_search([x], evaluate, t([1.0]), max_kl=1.0)
     assert res.accepted and res.steps_tried == 1 and res.step_fraction == 1.0
     assert x.item() == 1.0 and res.surrogate == 0.0 and res.surrogate_before == -1.0 and res.kl == 0.5
 
 
 def test_line_search_shrinks_until_kl_fits():
-    x, surrogate, kl = _quadratic_problem(0.0, 1.0)
-    res = backtracking_line_search([x], surrogate, kl, t([1.0]), max_kl=0.1)  # KL 0.5, 0.125, then 0.03125
+    x, evaluate = _quadratic_problem(0.0, 1.0)
+    res = backtracking_line_search([x], evaluate, t([1.0]), max_kl=0.1)  # KL 0.5, 0.125, then 0.03125
     assert res.accepted and res.steps_tried == 3 and res.step_fraction == 0.25
     assert x.item() == 0.25 and res.kl == pytest.approx(0.03125)
 
 
 def test_line_search_rejects_and_restores_exactly():
     x0 = 0.1234567890123
-    x, surrogate, kl = _quadratic_problem(x0, x0)  # already optimal: every step makes it worse
+    x, evaluate = _quadratic_problem(x0, x0)  # already optimal: every step makes it worse
     before = x.clone()
-    res = backtracking_line_search([x], surrogate, kl, t([0.7]), max_kl=10.0, max_backtracks=4)
+    res = backtracking_line_search([x], evaluate, t([0.7]), max_kl=10.0, max_backtracks=4)
     assert not res.accepted and res.steps_tried == 4 and res.step_fraction == 0.0
     assert torch.equal(x, before) and res.surrogate == res.surrogate_before and res.kl == 0.0
 
 
 def test_line_search_rejects_non_finite_kl():
-    x, surrogate, _ = _quadratic_problem(0.0, 1.0)
-    res = backtracking_line_search([x], surrogate, lambda: t(float("nan")), t([1.0]), max_kl=1.0, max_backtracks=3)
+    x, evaluate = _quadratic_problem(0.0, 1.0)
+    res = backtracking_line_search([x], lambda: (evaluate()[0], t(float("nan"))), t([1.0]), max_kl=1.0, max_backtracks=3)
     assert not res.accepted and x.item() == 0.0
+
+
+@pytest.mark.parametrize(("optimum", "max_kl", "calls"), [(1.0, 0.1, 3), (0.0, 10.0, 5)])  # accepted third; rejected
+def test_line_search_evaluates_last_at_the_final_parameters(optimum, max_kl, calls):
+    """Its last call is at the parameters it leaves (a caller reuses what it computed there), accepted or not."""
+    x, evaluate = _quadratic_problem(0.0, optimum)
+    seen: list[float] = []
+    res = backtracking_line_search([x], lambda: (seen.append(x.item()), evaluate())[1], t([1.0]), max_kl=max_kl,
+                                   max_backtracks=4, surrogate_before=float(evaluate()[0]))  # fmt: skip
+    assert res.accepted == (calls == 3) and seen[-1] == x.item() and len(seen) == calls
 
 
 # ---------------------------------------------------------------------------------------------------------- returns / GAE

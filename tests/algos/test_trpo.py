@@ -187,3 +187,22 @@ def test_config_validation(field, value):
 def test_advantage_config_validation(field, value):
     with pytest.raises(ValueError, match=field):
         AdvantageConfig(**{field: value})
+
+
+@pytest.mark.parametrize("kind", ["gaussian", "hierarchical"])
+def test_old_dist_none_is_the_policy_itself_with_one_forward_pass_per_candidate(kind):
+    """``old_dist=None`` takes the old policy from the gradient's own forward pass: the same step, bit for bit, as
+    passing it; the batch's policy is computed once at the start and once per line-search candidate, no more."""
+    policy, obs, old, actions, advantages = _problem(kind)
+    given = trpo_update(list(policy.parameters()), lambda: policy(obs), old, actions, advantages)
+    theta_given = get_flat_params(list(policy.parameters()))
+    policy, obs, _, actions, advantages = _problem(kind)
+    calls = []
+
+    def dist_fn():
+        calls.append(1)
+        return policy(obs)
+
+    own = trpo_update(list(policy.parameters()), dist_fn, None, actions, advantages)
+    assert own == given and torch.equal(get_flat_params(list(policy.parameters())), theta_given)
+    assert own.accepted and len(calls) == 1 + own.line_search_steps

@@ -153,13 +153,12 @@ class LineSearchResult(NamedTuple):
     surrogate: float
     """Surrogate at the final parameters."""
     kl: float
-    """``kl_fn()`` at the final parameters."""
+    """The KL ``evaluate_fn`` returned at the final parameters."""
 
 
 def backtracking_line_search(
     params: Sequence[Tensor],
-    surrogate_fn: Callable[[], Tensor | float],
-    kl_fn: Callable[[], Tensor | float],
+    evaluate_fn: Callable[[], tuple[Tensor | float, Tensor | float]],
     full_step: Tensor,
     max_kl: float,
     max_backtracks: int = 10,
@@ -168,23 +167,26 @@ def backtracking_line_search(
 ) -> LineSearchResult:
     """Try ``theta + shrink^i full_step`` for ``i = 0, 1, ...`` and keep the first that is feasible and better.
 
-    A candidate is accepted only if ``kl_fn() <= max_kl`` (the trust region actually holds, not just its quadratic
-    model) AND ``surrogate_fn()`` (to be maximised) strictly exceeds its value at the start; non-finite values are
-    rejected. If no candidate passes, the original parameters are restored bit for bit. Both callables are
-    evaluated under ``torch.no_grad`` and read the current values of ``params``.
+    ``evaluate_fn()`` returns ``(surrogate, kl)`` at the current values of ``params`` (the surrogate to be maximised and
+    the exact mean KL from the starting policy), so that a caller computes the policy once per candidate. A candidate
+    is accepted only if ``kl <= max_kl`` (the trust region actually holds, not just its quadratic model) AND the
+    surrogate strictly exceeds its value at the start; non-finite values are rejected. If no candidate passes, the
+    original parameters are restored bit for bit. ``evaluate_fn`` is called under ``torch.no_grad``, and its last call
+    is at the final parameters (the accepted candidate, or the restored start), so a caller may keep what it computed
+    there. ``surrogate_before``: the surrogate at the start, if already known (else one more call).
     """
     params = list(params)
     theta_old = get_flat_params(params)
     with torch.no_grad():
-        f_old = float(surrogate_fn()) if surrogate_before is None else float(surrogate_before)
+        f_old = float(evaluate_fn()[0]) if surrogate_before is None else float(surrogate_before)
         for i in range(max_backtracks):
             fraction = shrink**i
             set_flat_params(params, theta_old + fraction * full_step)
-            f_new, kl = float(surrogate_fn()), float(kl_fn())
+            f_new, kl = (float(v) for v in evaluate_fn())
             if math.isfinite(f_new) and math.isfinite(kl) and kl <= max_kl and f_new > f_old:
                 return LineSearchResult(True, i + 1, fraction, f_old, f_new, kl)
         set_flat_params(params, theta_old)
-        return LineSearchResult(False, max_backtracks, 0.0, f_old, f_old, float(kl_fn()))
+        return LineSearchResult(False, max_backtracks, 0.0, f_old, f_old, float(evaluate_fn()[1]))
 
 
 # --------------------------------------------------------------------------------------------------------------------

@@ -99,7 +99,7 @@ def surrogate_objective(
 def trpo_update(
     policy_params: Sequence[Tensor],
     dist_fn: Callable[[], Distribution],
-    old_dist: Distribution,
+    old_dist: Distribution | None,
     actions: Tensor,
     advantages: Tensor,
     cfg: TRPOConfig | None = None,
@@ -110,13 +110,17 @@ def trpo_update(
     Natural-gradient direction ``s = (F + damping I)^-1 g`` by conjugate gradient on exact Fisher-vector products of
     the mean KL, full step ``beta s`` with ``beta = sqrt(2 delta / s^T F s)``, then a backtracking line search that
     accepts only a step that keeps the exact mean KL within ``delta`` and improves the surrogate (otherwise the
-    parameters are restored).
+    parameters are restored). The policy is computed on the batch once at the start (with its graph, for ``g``), once
+    per line-search candidate (surrogate and KL from the same forward pass), and the statistics of the final parameters
+    reuse the last candidate's.
 
     Args:
         policy_params: the trainable tensors; nothing else is changed.
         dist_fn: recomputes the policy's distribution on the batch's ``B`` states from the current parameter values
             (a closure such as ``lambda: policy(obs)``).
-        old_dist: the distribution that generated the data (``dist_fn()`` before the update; detached here).
+        old_dist: the distribution that generated the data, detached here; ``None``: ``dist_fn()`` at the current
+            parameters (the usual case: the batch was sampled by the policy being updated), taken from the forward pass
+            the gradient needs rather than a second one.
         actions: ``[B, ...]`` taken actions in the distribution's encoding.
         advantages: ``[B]`` advantage estimates (standardised here if ``cfg.normalize_advantages``).
         cfg: settings; ``TRPOConfig()`` if ``None``.
@@ -128,14 +132,14 @@ def trpo_update(
     params = list(policy_params)
     if not params or not all(p.requires_grad for p in params):
         raise ValueError("policy_params must be a non-empty list of tensors that require grad")
-    old_dist = old_dist.detach()
+    dist = dist_fn()
+    old_dist = dist.detach() if old_dist is None else old_dist.detach()
     adv = advantages.detach().reshape(-1)
     if cfg.normalize_advantages:
         adv = standardize(adv)
     old_log_prob = old_dist.log_prob(actions).detach()
     theta_old = get_flat_params(params)
 
-    dist = dist_fn()
     surrogate = surrogate_objective(dist, actions, old_log_prob, adv, cfg.entropy_coef)
     surrogate_before = float(surrogate.detach())
     entropy_before = float(dist.entropy().mean().detach())
@@ -165,19 +169,25 @@ def trpo_update(
     if beta == 0.0:
         return no_step(beta, residual, expected)
 
+    last: list[tuple[Distribution, Tensor]] = []  # the policy and per-state KL at the line search's last candidate
+
+    def evaluate() -> tuple[Tensor, Tensor]:
+        candidate = dist_fn()
+        kl_states = old_dist.kl(candidate)
+        last[:] = [(candidate, kl_states)]
+        return surrogate_objective(candidate, actions, old_log_prob, adv, cfg.entropy_coef), kl_states.mean()
+
     result = backtracking_line_search(
         params,
-        surrogate_fn=lambda: surrogate_objective(dist_fn(), actions, old_log_prob, adv, cfg.entropy_coef),
-        kl_fn=lambda: old_dist.kl(dist_fn()).mean(),
+        evaluate,
         full_step=full_step,
         max_kl=cfg.max_kl,
         max_backtracks=cfg.line_search_backtracks,
         shrink=cfg.line_search_shrink,
         surrogate_before=surrogate_before,
     )
+    new_dist, kl = last[0]  # the line search's last call is at the final parameters
     with torch.no_grad():
-        new_dist = dist_fn()
-        kl = old_dist.kl(new_dist)
         entropy = float(new_dist.entropy().mean())
     return TRPOStats(
         kl=float(kl.mean()),

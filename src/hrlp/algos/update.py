@@ -53,11 +53,9 @@ class TRPOUpdate:
         self.policy, self.cfg = policy, cfg
 
     def __call__(self, obs: Tensor, actions: Tensor, advantages: Tensor) -> dict[str, float]:
-        with torch.no_grad():
-            old_dist = self.policy(obs)
         stride = round(1 / self.cfg.fisher_fraction)
-        stats = trpo_update(
-            list(self.policy.parameters()), lambda: self.policy(obs), old_dist, actions, advantages, self.cfg,
+        stats = trpo_update(  # old_dist None: the policy's own, from the update's first forward pass
+            list(self.policy.parameters()), lambda: self.policy(obs), None, actions, advantages, self.cfg,
             fisher_dist_fn=None if stride == 1 else lambda: self.policy(obs[::stride]),
         )  # fmt: skip
         return {k: float(v) for k, v in stats.to_dict().items()}

@@ -419,8 +419,11 @@ def start_bank(path: str, name: str = HANDOVER_BANK) -> tuple[np.ndarray, np.nda
 #: Where ``GripperTask(starts="recovery")`` draws its bank from: states just after ``gripper-clearance``'s own greedy
 #: episodes pushed the capsule more than 3 cm (``python benchmarks/gripper_recovery.py`` writes it).
 GRIPPER_RECOVERY_STARTS_FILE = "assets/gripper_recovery_starts.npz"
+#: Where ``GripperTask(starts="recovery-2")`` draws its bank from: the same for ``gripper-recovery``'s own episodes (the
+#: second round; ``python benchmarks/gripper_recovery.py --skill gripper-recovery --first-seed 1000000`` writes it).
+GRIPPER_RECOVERY_2_STARTS_FILE = "assets/gripper_recovery_2_starts.npz"
 #: The start banks shipped with hrlp, by the name ``GripperTask.starts`` takes for them.
-GRIPPER_BANKS = {"recovery": GRIPPER_RECOVERY_STARTS_FILE}
+GRIPPER_BANKS = {"recovery": GRIPPER_RECOVERY_STARTS_FILE, "recovery-2": GRIPPER_RECOVERY_2_STARTS_FILE}
 
 
 def gripper_start_bank(starts: str) -> tuple[np.ndarray, np.ndarray]:
@@ -445,8 +448,9 @@ class GripperTask(Task):
     paper's "many close positions" (Section 4.1).
     With ``starts``, a share ``starts_fraction`` of the episodes begins instead from a physics state of a start
     bank (an ``.npz`` written by :func:`hrlp.skills.starts.write_start_bank`, read without pickle): the states at
-    which a Manager handed over to the Gripper (``hrlp dagger``, the paper's Appendix C), or the shipped bank
-    ``"recovery"``: states just after a Gripper pushed the capsule away, from which it must still grip.
+    which a Manager handed over to the Gripper (``hrlp dagger``, the paper's Appendix C), or a shipped bank:
+    ``"recovery"`` (``"recovery-2"``), states just after ``gripper-clearance`` (``gripper-recovery``) pushed the capsule
+    away, from which it must still grip.
     Reward: :class:`GripReward`. Success: :class:`SparseSuccess` (Definition 1).
     """
 
@@ -456,7 +460,7 @@ class GripperTask(Task):
     """Definition 1 thresholds."""
     starts: str | None = None
     """Path of a start bank (its ``handover_qpos``/``handover_qvel`` arrays), a shipped bank's name (``"recovery"``,
-    :data:`GRIPPER_BANKS`), or None for the task's own starts only."""
+    ``"recovery-2"``: :data:`GRIPPER_BANKS`), or None for the task's own starts only."""
     starts_fraction: float = 1.0
     """With ``starts``, the share of episodes that begin from the bank (the rest from the task's own start set)."""
     angle_range: float = math.pi

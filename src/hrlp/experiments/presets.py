@@ -43,6 +43,9 @@ class Run:
     """For a run that starts from a student of the scripted grasp: the imitation (:func:`hrlp.skills.imitate.imitate`,
     behaviour cloning and DAgger) written as the run's iteration 0, which TRPO then continues to the budget (None: TRPO
     from a fresh network). Its expert and student episodes are not counted in the run's environment steps."""
+    seed_offset: int = 0
+    """Added to each of the preset's seeds for this run (its directory keeps the preset's seed): a recipe whose skill
+    was trained with a seed other than the preset's, rebuilt with that seed."""
 
 
 @dataclass(frozen=True)
@@ -69,8 +72,9 @@ class Preset:
         return replace(self, budget=steps, runs=tuple(replace(r, steps=None) for r in self.runs))
 
     def config(self, run: Run, seed: int) -> TrainConfig:
-        """The full config of ``run`` with ``seed`` and its budget (its own, else the preset's)."""
-        return replace(run.config, seed=seed, steps=run.steps or self.budget)
+        """The full config of ``run`` with ``seed`` (plus the run's ``seed_offset``) and its budget (its own, else the
+        preset's)."""
+        return replace(run.config, seed=seed + run.seed_offset, steps=run.steps or self.budget)
 
 
 def _paper(task: str, batch: int, **kw: object) -> TrainConfig:
@@ -314,7 +318,7 @@ def _shipped_skills() -> Preset:
         "the Gripper); a Reacher trained for hand-over (ReacherHandover: pre-grasp goals above the capsule, the capsule left "
         "in place, the claw open); a Gripper seeing the capsule's pose, imitated from the scripted grasp, then TRPO, and one "
         "also seeing the arm's distances to the capsule, imitated from the grasp that escapes tight starts, then trained on "
-        "from the states just after it pushed the capsule away; a "
+        "from the states just after it pushed the capsule away, in two rounds; a "
         "Mover from held starts (the capsule in that Gripper's claw); docs/skills.md",
         "Section 4.1",
         (
@@ -347,6 +351,11 @@ def _shipped_skills() -> Preset:
             Run("gripper-recovery", replace(clearance, init_from="gripper-clearance", task_kwargs={
                 **clearance.task_kwargs, "starts": "recovery", "starts_fraction": 0.3}), steps=8_000_000,
                 skill=("gripper-recovery", 15)),
+            # The second round: gripper-recovery trained on the same way, 30% of its episodes from the states just after
+            # gripper-recovery itself pushed the capsule away (the shipped bank "recovery-2"), with seed 200.
+            Run("gripper-recovery-2", replace(clearance, init_from="gripper-recovery", task_kwargs={
+                **clearance.task_kwargs, "starts": "recovery-2", "starts_fraction": 0.3}), steps=8_000_000,
+                skill=("gripper-recovery-2", 15), seed_offset=200),
             # MoverNoised's recipe from the held starts (the capsule in gripper-imitated's claw): a Mover that carries what
             # the Gripper gripped, one process on the batched backend.
             Run("mover-held", replace(_flat("MoverNoised", 25_000, episode_steps=100, init_log_std=-1.0), workers=1,

@@ -34,6 +34,7 @@ from hrlp.config import TrainConfig
 from hrlp.policies.mlp import GaussianPolicy, ValueNet, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import (
+    Batch,
     NonFiniteError,
     ParallelSampler,
     Sampler,
@@ -123,9 +124,7 @@ class Trainer:
             torch.set_num_threads(self._update_threads)
         T, N, D = batch.obs.shape
         obs = batch.obs.reshape(T * N, D)
-        with torch.no_grad():
-            values = self.value_net(obs).reshape(T, N)
-            next_values = self.value_net(batch.next_obs.reshape(T * N, D)).reshape(T, N)
+        values, next_values = batch_values(self.value_net, batch)
         rewards = batch.rewards if cfg.reward_scale == 1 else batch.rewards * cfg.reward_scale  # training only
         a = cfg.advantage
         adv = gae(rewards, values, next_values, batch.terminated, batch.truncated, a.gamma, a.gae_lambda,
@@ -256,6 +255,27 @@ class Trainer:
                                      f"{float(tensor[where])}; refusing to save it over the checkpoint in "
                                      f"{directory}")  # fmt: skip
         return save_checkpoint(directory, tensors, meta)
+
+
+def batch_values(value_net: Callable[[torch.Tensor], torch.Tensor], batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+    """The baseline's ``V(s_t)`` and ``V(s_{t+1})`` over a batch, ``[T, N]`` each.
+
+    Within an episode the next observation is the next step's observation (the normaliser's statistics stay fixed
+    during a batch), so ``V(s_{t+1})`` is read from ``V(s_t)`` there and the network runs on ``next_obs`` only where an
+    episode ended and at the batch's last step: one forward pass over the batch instead of two. A batch that breaks
+    that rule (an environment whose next observation is not the one it steps from) gets the second pass."""
+    T, N, D = batch.obs.shape
+    with torch.no_grad():
+        values = value_net(batch.obs.reshape(T * N, D)).reshape(T, N)
+        ends = batch.terminated | batch.truncated
+        ends[-1] = True
+        inside = ~ends[:-1]
+        if not torch.equal(batch.next_obs[:-1][inside], batch.obs[1:][inside]):
+            return values, value_net(batch.next_obs.reshape(T * N, D)).reshape(T, N)
+        next_values = torch.empty_like(values)
+        next_values[:-1] = values[1:]
+        next_values[ends] = value_net(batch.next_obs[ends]).reshape(-1)
+    return values, next_values
 
 
 def config_differences(saved: TrainConfig, given: TrainConfig, ignore: tuple[str, ...] = ("steps",)) -> list[str]:
