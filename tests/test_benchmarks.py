@@ -165,3 +165,11 @@ def test_trpo_speed_refuses_a_baseline_checkout_without_hrlp_before_training(tmp
     out = _run("trpo_speed.py", f"--baseline-checkout {tmp_path} --skip arm", tmp_path)
     assert out.returncode == 1 and out.stdout == ""
     assert out.stderr.strip() == "--baseline-checkout compares the ReachAndGrip2 rows; it cannot go with --skip arm"
+
+
+def test_checkout_ab_runs_each_checkout_and_refuses_a_directory_without_hrlp(tmp_path):
+    out = _run("checkout_ab.py", f"{BENCH.parent} --task Reacher --steps 1 --rounds 1", tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert f"round 1, {BENCH.parent}: " in out.stdout and "of the cores, TRPO step" in out.stdout
+    bad = _run("checkout_ab.py", str(tmp_path), tmp_path)
+    assert bad.returncode != 0 and "not an hrlp checkout" in bad.stderr
