@@ -116,21 +116,28 @@ def test_gripper_handover_collects_four_banks_and_evaluates_every_start_set(tmp_
     assert again.returncode == 2 and "exists" in again.stderr
 
 
-def test_gripper_recovery_writes_the_first_states_of_the_shipped_recovery_bank(tmp_path):
+@pytest.mark.parametrize(
+    ("bank", "args", "skill"),
+    [
+        ("recovery", "", "gripper-clearance"),
+        ("recovery-2", "--skill gripper-recovery --first-seed 1000000", "gripper-recovery"),
+    ],
+)
+def test_gripper_recovery_writes_the_first_states_of_the_shipped_recovery_banks(tmp_path, bank, args, skill):
     from importlib import resources
 
-    from hrlp.envs.tasks import GRIPPER_RECOVERY_STARTS_FILE, gripper_start_bank, start_bank
+    from hrlp.envs.tasks import GRIPPER_BANKS, gripper_start_bank, start_bank
     from hrlp.skills import SkillLibrary, shipped_library_root
 
-    out = _run("gripper_recovery.py", f"--episodes 60 --out {tmp_path / 'b.npz'}", tmp_path)
+    out = _run("gripper_recovery.py", f"{args} --episodes 60 --out {tmp_path / 'b.npz'}", tmp_path)
     assert out.returncode == 0, out.stderr[-2000:]
     qpos, qvel = start_bank(str(tmp_path / "b.npz"))
-    shipped_qpos, shipped_qvel = gripper_start_bank("recovery")
-    assert 0 < len(qpos) < len(shipped_qpos)  # the defaults' first 60 episodes: a prefix of the shipped bank's 3,000
+    shipped_qpos, shipped_qvel = gripper_start_bank(bank)
+    assert 0 < len(qpos) < len(shipped_qpos)  # the command's first 60 episodes: a prefix of the shipped bank's 3,000
     np.testing.assert_array_equal(qpos, shipped_qpos[: len(qpos)])
     np.testing.assert_array_equal(qvel, shipped_qvel[: len(qvel)])
-    with np.load(resources.files("hrlp.envs").joinpath(GRIPPER_RECOVERY_STARTS_FILE)) as z:  # recorded from this skill
-        assert str(z["meta_skill_sha256"]) == SkillLibrary(shipped_library_root()).load("gripper-clearance").content_hash
+    with np.load(resources.files("hrlp.envs").joinpath(GRIPPER_BANKS[bank])) as z:  # recorded from this skill
+        assert str(z["meta_skill_sha256"]) == SkillLibrary(shipped_library_root()).load(skill).content_hash
     again = _run("gripper_recovery.py", f"--episodes 1 --out {tmp_path / 'b.npz'}", tmp_path)
     assert again.returncode != 0 and "exists" in again.stderr
 

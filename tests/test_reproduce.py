@@ -26,8 +26,10 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     for p in PRESETS.values():
         assert len({r.name for r in p.runs}) == len(p.runs), p.name
         own = {r.name: r.steps for r in p.runs}
+        offset = {r.name: r.seed_offset for r in p.runs}
         for job in plan(p, __import__("pathlib").Path("out")):
-            assert job.config.steps == (own[job.run] or p.budget) and job.config.seed in p.seeds
+            assert job.config.steps == (own[job.run] or p.budget) and job.seed in p.seeds
+            assert job.config.seed == job.seed + offset[job.run]
         assert all(job.config.steps == 123 for job in plan(p.with_budget(123), __import__("pathlib").Path("out")))
     # Every environment a preset trains in can be built: its task arguments are valid and its skills are shipped.
     built = set()

@@ -82,11 +82,12 @@ def test_the_graspable_filter_keeps_only_close_states_with_the_capsule_at_rest(m
     assert not graspable(physics, None, 0.1) and graspable(physics, None, 1.0) and graspable(physics, None, None)
 
 
-def test_the_shipped_recovery_bank_is_a_start_set_by_name():
+@pytest.mark.parametrize("bank", ["recovery", "recovery-2"])
+def test_the_shipped_recovery_banks_are_start_sets_by_name(bank):
     from hrlp.envs.tasks import gripper_start_bank
 
-    qpos, _ = gripper_start_bank("recovery")
-    env = make("Gripper", starts="recovery", starts_fraction=1.0)
+    qpos, _ = gripper_start_bank(bank)
+    env = make("Gripper", starts=bank, starts_fraction=1.0)
     for seed in range(3):
         env.reset(seed=seed)
         d = env.unwrapped.physics.data

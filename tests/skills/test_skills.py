@@ -7,6 +7,7 @@ from typer.testing import CliRunner
 from hrlp.checkpoint import CheckpointError
 from hrlp.cli import app
 from hrlp.envs import make
+from hrlp.experiments.presets import PRESETS
 from hrlp.skills import SkillLibrary
 from hrlp.train import TrainConfig, load_policy, train
 
@@ -92,9 +93,10 @@ def test_shipped_skills_load_frozen_and_the_reacher_reaches():
 
     shipped = SkillLibrary(shipped_library_root())
     assert {"gripper", "reacher", "reacher3d", "s-reacher", "mover-noised", "mover-plain"} <= set(shipped.names())
+    recipes = {r.skill[0]: r for r in PRESETS["shipped-skills"].runs}
     for name in shipped.names():
-        m = shipped.manifest(name)
-        assert m["trained"]["config"]["seed"] == 0 and m["trained"]["env_steps"] > 1_000_000
+        m = shipped.manifest(name)  # trained with the recipe's seed: the preset's 0 plus the run's seed_offset
+        assert m["trained"]["config"]["seed"] == recipes[name].seed_offset and m["trained"]["env_steps"] > 1_000_000
         assert shipped.load(name).content_hash == m["sha256"]
     reacher = load_skill("reacher", library=shipped.root)
     env = make("Reacher")
