@@ -38,8 +38,9 @@ def main() -> None:
         for c in args.checkouts:
             env = {**os.environ, "PYTHONPATH": str(c.resolve() / "src")}
             out = subprocess.run([sys.executable, "-c", code], cwd=c, env=env, capture_output=True, text=True)
-            if out.returncode:
-                raise SystemExit(f"{c}: the run failed:\n{out.stderr[-2000:]}")
+            if out.returncode:  # one line: the error the run ended with (e.g. an unknown --task)
+                last = next((line for line in reversed(out.stderr.splitlines()) if line.strip()), "no error output")
+                raise SystemExit(f"{c}: the run failed: {last.strip()}")
             d = json.loads(out.stdout.strip().splitlines()[-1])
             print(f"round {r + 1}, {c}: {d['steps_per_s']:.0f} env steps/s, mj_step {d['physics']:.1%} of the cores, "
                   f"TRPO step {d['update']:.1%}, baseline fit {d['value_fit']:.1%}, env {d['env']:.1%}, "

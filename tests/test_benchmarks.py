@@ -180,3 +180,5 @@ def test_checkout_ab_runs_each_checkout_and_refuses_a_directory_without_hrlp(tmp
     assert f"round 1, {BENCH.parent}: " in out.stdout and "of the cores, TRPO step" in out.stdout
     bad = _run("checkout_ab.py", str(tmp_path), tmp_path)
     assert bad.returncode != 0 and "not an hrlp checkout" in bad.stderr
+    task = _run("checkout_ab.py", f"{BENCH.parent} --task NoSuchTask --steps 1 --rounds 1", tmp_path)
+    assert task.returncode != 0 and len(task.stderr.strip().splitlines()) == 1 and "the run failed: " in task.stderr
