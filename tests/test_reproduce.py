@@ -77,8 +77,9 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
                for p in PRESETS.values() if "handover" not in p.name
                and p.name not in ("reach-and-grip-1-samples", "reach-and-grip-2-imitated", "reach-and-grip-1-imitated",
                                  "reach-and-grip-1-claw", "reach-and-grip-2-claw", "reach-and-grip-2-clearance",
-                                 "reach-and-grip-2-chained", "reach-and-grip-2-chained-recovery", "reach-and-move-imitated",
-                                 "reach-and-move-chained") for r in p.runs)  # fmt: skip
+                                 "reach-and-grip-2-chained", "reach-and-grip-2-chained-recovery",
+                                 "reach-and-grip-2-chained-recovery-2", "reach-and-move-imitated", "reach-and-move-chained")
+               for r in p.runs)  # fmt: skip
     # The imitated grid is the reacher-handover grid and the tuned gripper + micro cells with gripper-imitated in place
     # of the gripper, and nothing else.
     reacher_handover = {r.name: r.config for r in PRESETS["reach-and-grip-2-reacher-handover"].runs}
@@ -132,13 +133,16 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
         assert h.initiation and h.pregrasp and replace(h, initiation=False, pregrasp=False) == other.config.macro.handover
         assert replace(r.config, macro=replace(r.config.macro, handover=other.config.macro.handover)) == other.config
         assert r.paper == other.paper, r.name
-    # ... and with gripper-recovery in gripper-clearance's place, nothing else changed.
-    recovery = PRESETS["reach-and-grip-2-chained-recovery"].runs
-    assert [r.name for r in recovery] == [r.name.replace("gripper-clearance", "gripper-recovery") for r in chained]
-    for r, other in zip(recovery, chained, strict=True):
-        assert r.config.macro.skills == ("gripper-recovery", "reacher-handover"), r.name
-        assert replace(r.config, macro=replace(r.config.macro, skills=other.config.macro.skills)) == other.config, r.name
-        assert r.paper == other.paper, r.name
+    # ... and with gripper-recovery, or the second round's gripper-recovery-2, in gripper-clearance's place, nothing else.
+    for preset, gripper in (("reach-and-grip-2-chained-recovery", "gripper-recovery"),
+                            ("reach-and-grip-2-chained-recovery-2", "gripper-recovery-2")):  # fmt: skip
+        recovery = PRESETS[preset].runs
+        assert [r.name for r in recovery] == [r.name.replace("gripper-clearance", gripper) for r in chained], preset
+        assert PRESETS[preset].budget == PRESETS["reach-and-grip-2-chained"].budget
+        for r, other in zip(recovery, chained, strict=True):
+            assert r.config.macro.skills == (gripper, "reacher-handover"), r.name
+            assert replace(r.config, macro=replace(r.config.macro, skills=other.config.macro.skills)) == other.config, r.name
+            assert r.paper == other.paper, r.name
     # reach-and-move with the imitated skills: reach (capsule-relative goals, the Reacher's own claw), grip, carry (the
     # Mover's target a world point), with the headline's Manager settings; TargetDistSum beside the paper's best pair.
     carry, carry_10 = PRESETS["reach-and-move-imitated"].runs

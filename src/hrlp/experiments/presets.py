@@ -617,6 +617,14 @@ PRESETS: dict[str, Preset] = {
             budget=3_000_000,
         ),
         Preset(
+            "reach-and-grip-2-chained-recovery-2",
+            "reach-and-grip-2-chained with gripper-recovery-2 (gripper-recovery trained on from the states just after its "
+            "own pushes: a second recovery round) in place of gripper-clearance; paper: its figure for gripper + reacher",
+            "Section 4.3.1, Figure 7; Appendix C (hand-over states)",
+            _figure_7_chained("gripper-recovery-2"),
+            budget=3_000_000,
+        ),
+        Preset(
             "reach-and-grip-2",
             "reach-and-grip Experiment 2, Manager over four skill sets x the reward grid c2 x tr, k = 15",
             "Section 4.3.1, Figure 7",
