@@ -71,10 +71,14 @@ def test_a_setting_added_after_the_snapshot_reads_back_as_the_runs_ran():
 
 
 #: Runs added after the defaults became the fast ones, and trained with them (in one process): the snapshot pins those.
-FAST_DEFAULT_RUNS = {
-    ("shipped-skills", r)
-    for r in ("reacher-handover", "gripper-claw", "gripper-clearance", "gripper-recovery", "gripper-recovery-2")
-} | {("reach-and-move-chained", f"reacher-handover+gripper-imitated+mover-held,target_coeff={c},chained") for c in (1, 10)}
+FAST_DEFAULT_RUNS = (
+    {
+        ("shipped-skills", r)
+        for r in ("reacher-handover", "gripper-claw", "gripper-clearance", "gripper-recovery", "gripper-recovery-2")
+    }
+    | {("reach-and-move-chained", f"reacher-handover+gripper-imitated+mover-held,target_coeff={c},chained") for c in (1, 10)}
+    | {("reach-and-move-samples", "manager:reacher-handover+gripper-imitated+mover-held,chained")}
+)
 
 
 def test_the_snapshot_pins_one_process_and_the_papers_update():

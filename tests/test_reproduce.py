@@ -183,14 +183,14 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     assert flat.config.task_kwargs == {"c2": 3, "tr": 0.03}
     assert (flat.config.batch_steps, flat.config.trpo.max_kl, samples.config(flat, 0).steps) == (50_000, 0.01, 3_000_000)
     # reach-and-move's samples preset: the chained Manager of reach-and-move-chained's TargetCoeff 1 cell (3M steps) and
-    # reach-and-move-flat's TargetCoeff 1 run four times as long, so that their runs can be shared.
+    # reach-and-move-flat's TargetCoeff 1 run for 16M steps, so that their runs can be shared.
     names = ("reach-and-move-samples", "reach-and-move-chained", "reach-and-move-flat")
     samples, chained, flat_rm = (PRESETS[n] for n in names)
     manager, flat = samples.runs
     cell = next(r for r in chained.runs if r.name.endswith("target_coeff=1,chained"))
     assert samples.config(manager, 2) == chained.config(cell, 2) and samples.config(manager, 0).steps == 3_000_000
     flat_cell = next(r for r in flat_rm.runs if r.name == "target_coeff=1")
-    assert samples.config(flat, 1) == replace(flat_rm.config(flat_cell, 1), steps=12_000_000)
+    assert samples.config(flat, 1) == replace(flat_rm.config(flat_cell, 1), steps=16_000_000)
     assert samples.metric == "success" and {0.2, 0.5} <= set(samples.thresholds or ())
     # Each tuned Appendix C sweep changes one setting of one cell of the tuned grid, and includes that cell itself.
     for name, base, setting in (
