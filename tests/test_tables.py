@@ -204,6 +204,29 @@ def test_build_tables_writes_the_sweep_scatter_and_the_sample_efficiency_table(t
         plot_sweep([(1.0, [0.5])], out / "scatter.txt", "x", "y")
 
 
+def test_a_success_preset_on_reach_and_move_shows_what_the_capsule_did(tmp_path):
+    root, out = tmp_path / "runs", tmp_path / "results"
+    manager = "manager:reacher-handover+gripper-imitated+mover-held,chained"
+    _write_run(root, "reach-and-move-samples", manager, 0, 0.9, [0.1, 0.6, 0.9])
+    _write_run(root, "reach-and-move-samples", "flat", 0, 0.0, [0.0, 0.0, 0.0])
+    result_path = root / "reach-and-move-samples" / run_dir_name(manager) / "s0" / "result.json"
+    result = json.loads(result_path.read_text())
+    interval = {"low": 0.0, "high": 1.0}
+    result["move"] = {"lift_rate": {"mean": 0.95, **interval}, "min_target_dist": {"mean": 0.012, **interval},
+                      "relative_target_dist_sum": {"mean": 15.3, **interval},
+                      "untouched_target_dist_sum": {"mean": -45.0, **interval}}  # fmt: skip
+    result_path.write_text(json.dumps(result))
+    build_tables(root, out)
+    md = (out / "reach-and-move-samples.md").read_text()
+    assert "| success / lifted / min d(C, T) / TargetDistSum minus untouched |" in md
+    assert "| 0.9 / 0.95 / 0.012 m / +15.3 (untouched -45.0) |" in md  # the Manager's row
+    assert "| flat | 1 | 0 [0, 0.1] | 0 | - | 30,000 | 0.02 | - |" in md.splitlines()  # no move record: '-'
+    # A success preset whose runs recorded no capsule moves has no such column.
+    _write_run(root, "headline", "flat", 0, 0.0, [0.0, 0.0])
+    build_tables(root, out)
+    assert "TargetDistSum minus untouched" not in (out / "headline.md").read_text()
+
+
 def test_grid_lines_lay_runs_out_as_the_papers_figure():
     lines = grid_lines({"a,c2=3,tr=0.03": ("0.5", 0.86), "a,c2=4,tr=0.06": ("0.25", None), "b,c2=3,tr=0.03": ("0", 0.1)})
     assert lines == [

@@ -515,7 +515,8 @@ def build_tables(
                 "wall time is that of the original runs.",
                 "",
             ]
-        moving = metric == "target_dist_sum"
+        # Moving presets, and any other whose runs recorded what the capsule did (a success-metric reach-and-move preset).
+        moving = metric == "target_dist_sum" or any(r.get("move") for name in order for _, r in runs[name])
         lines += [
             "| run | seeds | ours | IQM | paper | env steps per run | wall time (h, all seeds) |"
             + (" success / lifted / min d(C, T) / TargetDistSum minus untouched |" if moving else "")
