@@ -185,13 +185,14 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
     # reach-and-move's samples preset: the chained Manager of reach-and-move-chained's TargetCoeff 1 cell (3M steps) and
     # reach-and-move-flat's TargetCoeff 1 run for 16M steps, so that their runs can be shared.
     names = ("reach-and-move-samples", "reach-and-move-chained", "reach-and-move-flat")
-    samples, chained, flat_rm = (PRESETS[n] for n in names)
-    manager, flat = samples.runs
-    cell = next(r for r in chained.runs if r.name.endswith("target_coeff=1,chained"))
-    assert samples.config(manager, 2) == chained.config(cell, 2) and samples.config(manager, 0).steps == 3_000_000
-    flat_cell = next(r for r in flat_rm.runs if r.name == "target_coeff=1")
-    assert samples.config(flat, 1) == replace(flat_rm.config(flat_cell, 1), steps=16_000_000)
-    assert samples.metric == "success" and {0.2, 0.5} <= set(samples.thresholds or ())
+    rm_samples, rm_chained, rm_flat = (PRESETS[n] for n in names)
+    rm_manager, rm_flat_run = rm_samples.runs
+    cell = next(r for r in rm_chained.runs if r.name.endswith("target_coeff=1,chained"))
+    assert rm_samples.config(rm_manager, 2) == rm_chained.config(cell, 2)
+    assert rm_samples.config(rm_manager, 0).steps == 3_000_000
+    flat_cell = next(r for r in rm_flat.runs if r.name == "target_coeff=1")
+    assert rm_samples.config(rm_flat_run, 1) == replace(rm_flat.config(flat_cell, 1), steps=16_000_000)
+    assert rm_samples.metric == "success" and {0.2, 0.5} <= set(rm_samples.thresholds or ())
     # Each tuned Appendix C sweep changes one setting of one cell of the tuned grid, and includes that cell itself.
     for name, base, setting in (
         ("manager-kl-tuned", "gripper+s-reacher", lambda c: c.trpo.max_kl),

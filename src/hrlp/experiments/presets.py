@@ -487,7 +487,7 @@ PRESETS: dict[str, Preset] = {
                 Run("flat", _flat("ReachAndMove", task_kwargs={"target_coeff": 1})),
             ),
             budget=16_000_000,
-            thresholds=(0.2, 0.5, 0.8),  # the issue's 20% and 50%, and Figure 5's target
+            thresholds=(0.2, 0.5, 0.8),  # the samples targets' 20% and 50%, and Figure 5's 80%
         ),
         Preset(
             "reach-and-grip-1",
