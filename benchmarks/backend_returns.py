@@ -22,9 +22,8 @@ from pathlib import Path
 import torch
 from scipy import stats
 
-from hrlp.config import TrainConfig
+from hrlp.config import Handover, MacroSpec, TrainConfig
 from hrlp.evaluate import evaluate_run
-from hrlp.skills.macro_env import Handover, MacroSpec
 from hrlp.train import train
 
 

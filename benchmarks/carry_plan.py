@@ -19,11 +19,12 @@ import argparse
 
 import numpy as np
 
+from hrlp.config import Handover
 from hrlp.envs import make
 from hrlp.envs.tasks import SparseSuccess
 from hrlp.evaluate import wilson_interval
 from hrlp.skills import load_skill
-from hrlp.skills.macro_env import Handover, MacroEnv, step_macros
+from hrlp.skills.macro_env import MacroEnv, step_macros
 
 C, T = slice(21, 24), slice(24, 27)
 

@@ -57,8 +57,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         run = args.run
         if run is None:
-            from hrlp.config import TrainConfig
-            from hrlp.skills.macro_env import Handover, MacroSpec
+            from hrlp.config import Handover, MacroSpec, TrainConfig
             from hrlp.train import train
 
             run = Path(tmp) / "manager"

@@ -54,7 +54,7 @@ def main() -> None:
         info: dict = {}
         for t in range(args.steps):
             features = skill.features_of([p])
-            obs, _, _, trunc, info = env.step(skill.act(obs[None, :24], np.zeros((1, 0)), features)[0])
+            obs, _, _, trunc, info = env.step(skill.torques(obs[None, :24], np.zeros((1, 0)), features)[0])
             min_d = min(min_d, p.hand_to_capsule())
             if info["success"] and first < 0:
                 first = t + 1

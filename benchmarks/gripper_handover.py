@@ -37,7 +37,8 @@ from hrlp.envs.physics import ArmPhysics
 from hrlp.envs.tasks import HANDOVER_BANK, GripperTask, SparseSuccess
 from hrlp.evaluate import Interval, wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
-from hrlp.skills import Skill, load_skill
+from hrlp.skills import ArmSkill as Skill
+from hrlp.skills import load_skill
 from hrlp.skills.dagger import collect_handover_states
 from hrlp.skills.starts import write_start_bank
 from hrlp.train import TrainConfig
@@ -54,7 +55,7 @@ def success(skill: Skill, task_kwargs: dict[str, Any], episodes: int, steps: int
         won = False
         for _ in range(steps):
             features = skill.features_of([p])
-            obs, _, _, truncated, info = env.step(skill.act(obs[None, :24], np.zeros((1, 0)), features)[0])
+            obs, _, _, truncated, info = env.step(skill.torques(obs[None, :24], np.zeros((1, 0)), features)[0])
             won |= bool(info["success"])
             if truncated:
                 break

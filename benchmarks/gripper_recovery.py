@@ -72,7 +72,7 @@ def main() -> None:
                 qpos.append(p.data.qpos.copy())
                 qvel.append(p.data.qvel.copy())
                 kept += 1
-            obs, _, _, truncated, info = env.step(skill.act(obs[None, :24], np.zeros((1, 0)), skill.features_of([p]))[0])
+            obs, _, _, truncated, info = env.step(skill.torques(obs[None, :24], np.zeros((1, 0)), skill.features_of([p]))[0])
             won |= bool(info["success"])
             if truncated:
                 break

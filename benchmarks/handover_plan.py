@@ -15,9 +15,10 @@ import argparse
 
 import numpy as np
 
+from hrlp.config import Handover
 from hrlp.envs import make
 from hrlp.skills import load_skill
-from hrlp.skills.macro_env import Handover, MacroEnv, step_macros
+from hrlp.skills.macro_env import MacroEnv, step_macros
 
 C = slice(21, 24)
 

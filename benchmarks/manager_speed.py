@@ -24,8 +24,7 @@ from dataclasses import replace
 
 import torch
 
-from hrlp.config import PAPER_SETTINGS, with_settings
-from hrlp.skills.macro_env import MacroSpec
+from hrlp.config import PAPER_SETTINGS, MacroSpec, with_settings
 from hrlp.train import TrainConfig, Trainer
 
 

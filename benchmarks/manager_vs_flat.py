@@ -22,9 +22,8 @@ def _run(kind: str, seed: int, steps: int, out: Path, episodes: int, flat_batch:
 
     from hrlp.algos.trpo import TRPOConfig
     from hrlp.checkpoint import checkpoint_exists
-    from hrlp.config import PAPER_SETTINGS, with_settings
+    from hrlp.config import PAPER_SETTINGS, MacroSpec, with_settings
     from hrlp.evaluate import evaluate_run
-    from hrlp.skills.macro_env import MacroSpec
     from hrlp.train import TrainConfig, train
 
     torch.set_num_threads(1)

@@ -52,7 +52,7 @@ def test_the_worker_count_follows_the_cores_capped_by_the_environments(monkeypat
 
 
 def test_the_backend_is_batched_for_arm_tasks_and_serial_elsewhere():
-    from hrlp.skills.macro_env import MacroSpec
+    from hrlp.config import MacroSpec
 
     assert TrainConfig(task="Reacher").resolved().backend == "batched"
     assert TrainConfig(task="hrlp/ReachAndGrip2-v0").resolved().backend == "batched"

@@ -8,11 +8,11 @@ import pytest
 from typer.testing import CliRunner
 
 from hrlp.cli import app
+from hrlp.config import Handover
 from hrlp.experiments.presets import PRESETS, Preset, Run
 from hrlp.experiments.runner import plan, reproduce, training_seconds
 from hrlp.experiments.tables import bootstrap_interval, build_tables
 from hrlp.plots import read_progress
-from hrlp.skills.macro_env import Handover
 from hrlp.train import TrainConfig, env_factory
 
 

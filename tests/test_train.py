@@ -14,9 +14,9 @@ from typer.testing import CliRunner
 from hrlp.algos.value import ValueFitConfig, fit_value
 from hrlp.checkpoint import load_checkpoint
 from hrlp.cli import app
+from hrlp.config import MacroSpec
 from hrlp.evaluate import evaluate_run, mean_interval, wilson_interval
 from hrlp.rollout import Sampler
-from hrlp.skills.macro_env import MacroSpec
 from hrlp.train import TrainConfig, Trainer, env_factory, load_policy, load_trained, train
 from hrlp.training.loop import batch_values
 

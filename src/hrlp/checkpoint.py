@@ -75,6 +75,7 @@ import torch
 from safetensors import SafetensorError
 
 from hrlp.atomic import StorageError, directory_lock
+from hrlp.config import TrainConfig
 
 FORMAT_VERSION = 1
 WEIGHTS_FILE = "weights.safetensors"
@@ -594,3 +595,24 @@ def load_module(prefix: str, module: torch.nn.Module, tensors: Mapping[str, torc
 
 def _more(keys: list[str]) -> str:
     return f" (and {len(keys) - 1} more)" if len(keys) > 1 else ""
+
+
+#: Keys of a training run's checkpoint meta that its readers need, with their JSON types. ``meta.json`` is not covered
+#: by the content hash (that is the weights' sha256), so they are checked on every read.
+RUN_META_KEYS: dict[str, type] = {"config": dict, "iteration": int, "env_steps": int, "normalizer": dict}
+
+
+def read_run_checkpoint(
+    directory: Path, more_keys: dict[str, type] | None = None
+) -> tuple[dict[str, torch.Tensor], dict[str, Any], TrainConfig]:
+    """``(tensors, meta, config)`` of a training run's checkpoint; a missing or mistyped key of :data:`RUN_META_KEYS`
+    (and ``more_keys``) or a malformed config raises :class:`~hrlp.checkpoint.CheckpointError` naming the file."""
+    tensors, meta = load_checkpoint(directory, required={**RUN_META_KEYS, **(more_keys or {})})
+    where = Path(directory) / META_FILE
+    try:
+        cfg = TrainConfig.from_json(meta["config"])
+    except KeyError as e:
+        raise CheckpointError(f"{where}: its 'config' has no {e}") from None
+    except (TypeError, ValueError, AttributeError) as e:
+        raise CheckpointError(f"{where}: its 'config' is malformed ({' '.join(str(e).split())})") from None
+    return tensors, meta, cfg

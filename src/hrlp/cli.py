@@ -610,9 +610,16 @@ def train(
 @_settings_options(batch_steps=5_000)  # the paper's Manager batch (TrainConfig's default is the flat runs' 50,000)
 def train_manager(
     ctx: typer.Context,
-    task: Annotated[str, typer.Argument(help="hrlp task the Manager solves, e.g. ReachAndGrip2.")],
+    task: Annotated[
+        str,
+        typer.Argument(help="Task the Manager solves: an hrlp task (e.g. ReachAndGrip2), a Gymnasium id or MODULE:ID."),
+    ],
     skills: Annotated[
-        str, typer.Option(help="Comma-separated skill names (see 'hrlp skills list'), e.g. gripper,reacher.")
+        str,
+        typer.Option(
+            help="Comma-separated skills: library names (see 'hrlp skills list'), e.g. gripper,reacher, or MODULE:NAME "
+            "Python references (a Skill, or a function returning one; docs/skills.md)."
+        ),
     ] = "",
     micro: Annotated[bool, typer.Option(help="Add the micro-action: direct torque control.")] = False,
     micro_duration: Annotated[
@@ -678,6 +685,13 @@ def train_manager(
             "above it) instead of 5 cm aside and 0-20 cm above (docs/skills.md); needs --handover.",
         ),
     ] = False,
+    chain: Annotated[
+        bool,
+        typer.Option(
+            help="Enforce the skills' initiation tests: a choice outside its skill's set runs the nearest skill before "
+            "it whose set holds (docs/skills.md)."
+        ),
+    ] = False,
     run_dir: _RUN_DIR = None,
     task_arg: _TASK_ARG = None,
     resume: _RESUME = False,
@@ -696,10 +710,7 @@ def train_manager(
             one = len(ignored) == 1
             raise ValueError(f"{', '.join(ignored)} set{'s' if one else ''} the micro-action, which this Manager does not "
                              f"have: add --micro, or leave {'it' if one else 'them'} out")  # fmt: skip
-        if ignored := [f"--{n.replace('_', '-')}" for n in ("handover_approach_height", "handover_open_torque",
-                                                              "handover_target_relative", "handover_initiation",
-                                                              "handover_pregrasp")
-                       if not handover and _given(ctx, n)]:  # fmt: skip
+        if ignored := [f"--{n.replace('_', '-')}" for n in _HANDOVER_OPTIONS if not handover and _given(ctx, n)]:
             one = len(ignored) == 1
             them = "it" if one else "them"
             raise ValueError(f"{', '.join(ignored)} set{'s' if one else ''} how Reachers are driven for hand-over, "
@@ -711,7 +722,7 @@ def train_manager(
         _check_task(task, settings["episode_steps"], task_arg, ctx)
         if note:
             err_console.print(note, soft_wrap=True, highlight=False)
-    from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
+    from hrlp.config import Handover, MacroSpec, MicroAction
 
     try:
         names = tuple(s.strip() for s in skills.split(",") if s.strip())
@@ -719,12 +730,25 @@ def train_manager(
         drive = Handover(approach_height=handover_approach_height, open_torque=handover_open_torque,
                          target_relative=handover_target_relative,
                          initiation=handover_initiation, pregrasp=handover_pregrasp) if handover else None  # fmt: skip
-        spec = MacroSpec(names, k, m, None if library is None else str(library), drive)
+        if not _is_arm_task(task) and not any(_given(ctx, n) for n in ("handover", *_HANDOVER_OPTIONS)):
+            drive = None  # hand-over drives the arm's Reachers and Movers; elsewhere skills run as they are
+        spec = MacroSpec(names, k, m, None if library is None else str(library), drive, chain)
     except ValueError:
         if not resume:  # with --resume the run's own macro-actions are used (options given are compared with them)
             raise
         spec = None
     _train(ctx, spec, run_dir, resume, task_arg)
+
+
+_HANDOVER_OPTIONS = ("handover_approach_height", "handover_open_torque", "handover_target_relative",
+                     "handover_initiation", "handover_pregrasp")  # fmt: skip
+
+
+def _is_arm_task(task: str) -> bool:
+    """Whether ``task`` names one of hrlp's arm tasks (whose Reachers and Movers hand-over drives)."""
+    from hrlp.envs.registry import TASKS
+
+    return task.removeprefix("hrlp/").removesuffix("-v0") in TASKS
 
 
 def parse_task_args(items: list[str] | None) -> dict[str, Any]:
@@ -887,12 +911,12 @@ def _check_task(task: str, episode_steps: int | None, task_arg: list[str] | None
 
     kwargs = parse_task_args(task_arg)
     name = task.removeprefix("hrlp/").removesuffix("-v0")
-    if ctx is not None and ctx.info_name == "train-manager" and name not in TASKS:
-        raise ValueError(f"{task}: a Manager commands arm skills, so its task must be an hrlp task (see 'hrlp tasks')")
     valid = TASKS[name].arguments if name in TASKS else ()
     if unknown := [k for k in kwargs if valid and k not in valid and k != "episode_steps"]:  # physics, render_mode, ...
         raise ValueError(invalid_arguments_line(name, unknown, valid))
     _, action_space = probe_task(task, episode_steps, **kwargs)
+    if ctx is not None and ctx.info_name == "train-manager" and not isinstance(action_space, gym.spaces.Box):
+        raise ValueError(f"{task}: a Manager's skills emit Box actions; this environment's action space is {action_space}")
     if ctx is not None and _given(ctx, "init_log_std") and isinstance(action_space, gym.spaces.Discrete):
         raise ValueError(f"--init-log-std sets the Gaussian noise of continuous actions; {task}'s actions are "
                          f"{action_space}, drawn from a categorical policy (leave --init-log-std out)")  # fmt: skip
@@ -978,7 +1002,7 @@ def _micro_flag() -> tuple[Any, Any]:
     import dataclasses
 
     def put(c: Any, v: bool, p: dict[str, Any]) -> Any:
-        from hrlp.skills.macro_env import MicroAction
+        from hrlp.config import MicroAction
 
         if not v:
             micro = None
@@ -993,7 +1017,7 @@ def _handover_flag() -> tuple[Any, Any]:
     import dataclasses
 
     def put(c: Any, v: bool, p: dict[str, Any]) -> Any:
-        from hrlp.skills.macro_env import Handover
+        from hrlp.config import Handover
 
         fresh = Handover(approach_height=p["handover_approach_height"], open_torque=p["handover_open_torque"],
                          target_relative=p["handover_target_relative"], initiation=p["handover_initiation"],

@@ -19,12 +19,9 @@ import math
 import os
 import sys
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from hrlp import bounds
-
-if TYPE_CHECKING:
-    from hrlp.skills.macro_env import MacroSpec
 
 __all__ = [
     "ALGOS",
@@ -172,6 +169,124 @@ class ValueFitConfig:
             raise ValueError(f"history_size must be >= 1, got {self.history_size}")
         if not 0 < self.fraction <= 1:
             raise ValueError(f"value fraction must be in (0, 1], got {self.fraction}")
+
+
+@dataclass(frozen=True)
+class MicroAction:
+    """The micro-action: direct torques for ``duration`` steps, optionally penalised."""
+
+    duration: int = 1
+    """Low-level steps the torques are held for."""
+    penalty: float = 0.0
+    """Subtracted from the Manager's reward each time the micro-action is chosen (Appendix C)."""
+    max_torque: float = 1.0
+    """Bound on the micro-action's torques (Appendix C: bounds on micro-actions), in (0, 1]."""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.duration, bool) or not isinstance(self.duration, int) or self.duration < 1:
+            raise ValueError(f"MicroAction.duration must be a positive integer, got {self.duration!r}")
+        if not (self.penalty >= 0):
+            raise ValueError(f"MicroAction.penalty must be >= 0, got {self.penalty!r}")
+        if not (0 < self.max_torque <= 1):
+            raise ValueError(f"MicroAction.max_torque must be in (0, 1], got {self.max_torque!r}")
+
+
+@dataclass(frozen=True)
+class Handover:
+    """How a point skill (a Reacher) is driven so that the next skill can take over from where it stops.
+
+    The paper's interface (``MacroSpec.handover = None``) passes the Reacher an absolute point anywhere in the
+    workspace and runs it as trained. A Reacher trained on -d(H, goal) alone leaves the claw closed or skewed and
+    pushes through the capsule; these three changes make the state it leaves one the Gripper grips from
+    (docs/skills.md, "Skills that hand over").
+    """
+
+    relative: bool = True
+    """The Manager's goal is an offset from the capsule's centre in :data:`~hrlp.skills.skill.HANDOVER_POINT`'s box
+    (5 cm aside, 0-20 cm above), taken at the macro-action's start, instead of a point of the whole workspace."""
+    approach_height: float = 0.11
+    """Metres the goal is raised until the hand is above it (within ``approach_radius`` horizontally), so the hand
+    comes down onto the capsule from above instead of pushing through it from the side; 0 goes straight."""
+    approach_radius: float = 0.02
+    """Horizontal distance from the goal, metres, at which the hand counts as above it (then the goal drops)."""
+    open_torque: float = 0.2
+    """While a point skill runs, its two finger torques are replaced by this torque opening the claw (rc_close < 0,
+    lc_close > 0; ARM_CLAW facts): a weak push that keeps the claw open without sweeping the capsule; 0 leaves the
+    skill's own finger torques."""
+    target_relative: bool = False
+    """A moving skill's (a Mover's) target is an offset from the task's own target T in
+    :data:`~hrlp.skills.skill.HANDOVER_TARGET`'s box (10 cm each way), instead of a point of the whole workspace: the
+    Manager's first targets fall near T. Only on tasks that observe a target (reach-and-move)."""
+    initiation: bool = False
+    """Each skill starts only from its initiation set (:attr:`Skill.initiation`: the states like those it was trained
+    from, e.g. a Mover trained from held starts while the capsule is lifted): a choice outside its skill's set runs the
+    nearest skill before it in the Manager's order whose set holds (list skills in the order they chain: a Mover chosen
+    before the capsule is held runs the Gripper, or the Reacher while the hand is far), else the first skill whose set
+    holds, each with its own parameter block; the choice run is the one reported (``info['macro']``, the decision
+    shares). The skill that ran last counts as available wherever it has taken the arm (a Gripper's swing may leave its
+    starts' 9 cm), so a Mover chosen while the Gripper is still at work lets it go on; a choice runs as made where no
+    skill is available, and the micro-action always does."""
+
+    pregrasp: bool = False
+    """A point skill's goal is an offset in :data:`~hrlp.skills.skill.HANDOVER_PREGRASP`'s box (3 cm aside, 0-8 cm above
+    the capsule's centre) instead of HANDOVER_POINT's (5 cm, 0-20 cm): the Manager's first goals, the box's centre 4 cm
+    above C, leave the palm where a Gripper starts. Only with ``relative``."""
+
+    def __post_init__(self) -> None:
+        if self.pregrasp is True and self.relative is False:
+            raise ValueError("Handover.pregrasp is a box of capsule-relative goals: it needs relative=True")
+        for name in ("relative", "target_relative", "initiation", "pregrasp"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"Handover.{name} must be true or false, got {getattr(self, name)!r}")
+        for name in ("open_torque", "approach_height", "approach_radius"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not (0 <= v <= 1):
+                raise ValueError(f"Handover.{name} must be a number in [0, 1], got {v!r}")
+        if self.approach_height > 0 and self.approach_radius <= 0:
+            raise ValueError("Handover.approach_radius must be positive when approach_height is")
+
+
+@dataclass(frozen=True)
+class MacroSpec:
+    """Which skills a Manager commands, for how long, and its micro-action (a field of the training config)."""
+
+    skills: tuple[str, ...] = ()
+    """Skill references (:mod:`hrlp.training.sources`): library names, looked up in ``library``, then in
+    ``$HRLP_SKILLS`` / ``~/.hrlp/skills``, then among the skills shipped with hrlp (``hrlp skills list``); or
+    ``MODULE:NAME`` Python references."""
+    k: int | None = None
+    """Low-level steps per skill call (None: each skill's default)."""
+    micro: MicroAction | None = None
+    """The micro-action, or None."""
+    library: str | None = None
+    """A skill library directory searched first."""
+    handover: Handover | None = None
+    """How point skills hand over (:class:`Handover`); None runs them as the paper does (absolute goals, as trained)."""
+    chain: bool = False
+    """Enforce the skills' initiation tests: a choice outside its skill's set runs the nearest skill before it whose set
+    holds (:func:`hrlp.skills.core.initiated`; the arm's ``Handover.initiation`` does the same)."""
+
+    def __post_init__(self) -> None:
+        if not self.skills and self.micro is None:
+            raise ValueError("a Manager needs at least one skill or the micro-action (--micro)")
+        if len(set(self.skills)) != len(self.skills):
+            raise ValueError(f"skills are listed twice: {', '.join(self.skills)}")
+        if self.k is not None and (isinstance(self.k, bool) or not isinstance(self.k, int) or self.k < 1):
+            raise ValueError(f"k must be a positive integer, got {self.k!r}")
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-serialisable form (``chain`` only when set, so configs written before it read back unchanged)."""
+        d = dataclasses.asdict(self)
+        if not self.chain:
+            del d["chain"]
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> MacroSpec:
+        """Inverse of :meth:`to_json`."""
+        micro, handover = d.get("micro"), d.get("handover")
+        return cls(tuple(d["skills"]), d.get("k"), MicroAction(**micro) if micro else None, d.get("library"),
+                   Handover(**handover) if handover else None, bool(d.get("chain", False)))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -337,8 +452,6 @@ class TrainConfig:
         d["ppo"] = PPOConfig(**d.get("ppo", {}))
         d["value"] = ValueFitConfig(**value)
         if d.get("macro"):
-            from hrlp.skills.macro_env import MacroSpec  # imports gymnasium and the skills: only for a Manager's config
-
             d["macro"] = MacroSpec.from_json(d["macro"])
         else:
             d["macro"] = None

@@ -16,6 +16,7 @@ Everything is importable from here, as before the split.
 
 from __future__ import annotations
 
+from hrlp.checkpoint import RUN_META_KEYS, read_run_checkpoint
 from hrlp.config import ALGOS, TrainConfig  # torch-free (for `hrlp --help`)
 from hrlp.training.environments import (
     TRAINING_ONLY_TASK_ARGS,
@@ -26,12 +27,10 @@ from hrlp.training.environments import (
     run_factory,
 )
 from hrlp.training.loading import (
-    RUN_META_KEYS,
     TrainedPolicy,
     check_action_units,
     load_policy,
     load_trained,
-    read_run_checkpoint,
     warm_start,
 )
 from hrlp.training.logs import (

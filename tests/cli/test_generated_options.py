@@ -44,6 +44,7 @@ _MANAGER_OWN = {
     "handover_target_relative",
     "handover_initiation",
     "handover_pregrasp",
+    "chain",
 }
 OWN = {"train": _SHARED_OWN, "train-manager": _SHARED_OWN | _MANAGER_OWN}
 """Each command's own parameters, beside the generated ones."""

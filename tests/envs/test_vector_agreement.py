@@ -24,6 +24,7 @@ import pytest
 import torch
 
 from hrlp.algos.kernels import discounted_returns, gae
+from hrlp.config import MicroAction
 from hrlp.envs import make
 from hrlp.envs.batched import make_batched
 from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorEnv, VectorStep, action_decoder
@@ -31,7 +32,7 @@ from hrlp.policies.mlp import policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import Batch, Episode, Sampler, vector_env
 from hrlp.skills.library import load_skill
-from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv, MicroAction
+from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv
 
 TASK, N, EPISODE = "ReachAndGrip2", 3, 12
 LOOSE = {"tr1": 0.3, "tr2": 0.06}  # success within reach of random torques, so the success flags are compared both ways

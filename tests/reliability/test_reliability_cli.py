@@ -15,7 +15,7 @@ from bad_cli_inputs import CASES, WAS, fill, prepare, run_all, run_case, unmet
 
 from hrlp.algos.trpo import TRPOConfig
 from hrlp.bounds import MAX_NUM_ENVS, MAX_SEED, ray_address_problem
-from hrlp.skills.macro_env import MacroSpec, MicroAction
+from hrlp.config import MacroSpec, MicroAction
 from hrlp.train import TrainConfig, env_factory
 
 

@@ -13,10 +13,11 @@ from typer.testing import CliRunner
 
 from hrlp.checkpoint import load_checkpoint
 from hrlp.cli import app
+from hrlp.config import MicroAction
 from hrlp.policies.mlp import policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import NonFiniteError, ParallelSampler, Sampler
-from hrlp.skills.macro_env import MacroEnv, MicroAction
+from hrlp.skills.macro_env import MacroEnv
 from hrlp.train import TrainConfig, Trainer, train
 
 # 4 environments x 10 decisions per iteration, 30-step episodes.

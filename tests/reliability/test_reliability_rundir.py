@@ -13,8 +13,8 @@ from typer.testing import CliRunner
 from hrlp.atomic import LOCK_FILE, DirectoryLockedError, directory_lock
 from hrlp.checkpoint import checkpoint_exists, load_checkpoint, save_checkpoint
 from hrlp.cli import app
+from hrlp.config import Handover, MacroSpec, MicroAction
 from hrlp.experiments.runner import Job, run_job
-from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 from hrlp.train import TrainConfig, plan_steps, train
 
 FLAT = ["--batch-steps", "16", "--num-envs", "4", "--episode-steps", "20"]

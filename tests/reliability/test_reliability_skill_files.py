@@ -138,7 +138,7 @@ def test_the_shipped_skills_still_load_and_act():
         recorded = json.loads((shipped_library_root() / name / META_FILE).read_text())["sha256"]
         assert skill.content_hash == recorded and skill.k in (8, 15)
         features = torch.zeros(2, skill.feature_dim).numpy() if skill.features else None
-        torques = skill.act(torch.zeros(2, 24).numpy(), torch.zeros(2, skill.param.dim).numpy(), features)
+        torques = skill.torques(torch.zeros(2, 24).numpy(), torch.zeros(2, skill.param.dim).numpy(), features)
         assert torques.shape == (2, 9) and bool(torch.isfinite(torch.from_numpy(torques)).all())
 
 

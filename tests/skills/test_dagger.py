@@ -7,11 +7,11 @@ import pytest
 from typer.testing import CliRunner
 
 from hrlp.cli import app
+from hrlp.config import Handover, MacroSpec
 from hrlp.envs import make
 from hrlp.envs.tasks import start_bank
 from hrlp.skills import SkillLibrary, load_skill
 from hrlp.skills.dagger import DaggerConfig, collect_handover_states, graspable, run_round
-from hrlp.skills.macro_env import Handover, MacroSpec
 from hrlp.skills.starts import write_start_bank
 from hrlp.train import TrainConfig, Trainer, load_trained, train
 
@@ -111,7 +111,7 @@ def test_a_warm_started_run_begins_as_the_skill_acts():
     )
     obs, _ = make("Gripper").reset(seed=3)
     mean = trainer.policy.act_numpy(trainer.normalizer(obs, update=False)[None].astype(np.float32), deterministic=True)
-    np.testing.assert_allclose(np.clip(mean, -1, 1)[0], parent.act(obs[None, :24], np.zeros((1, 0)))[0], atol=1e-5)
+    np.testing.assert_allclose(np.clip(mean, -1, 1)[0], parent.torques(obs[None, :24], np.zeros((1, 0)))[0], atol=1e-5)
     assert all(p.requires_grad for p in trainer.policy.parameters()) and not trainer.normalizer.frozen
     trainer.sampler.close()
     with pytest.raises(ValueError, match="does not fit a Reacher run"):

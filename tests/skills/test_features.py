@@ -13,10 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hrlp.config import MacroSpec
 from hrlp.envs import make
 from hrlp.envs.batched import make_batched
 from hrlp.skills import SkillLibrary
-from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroSpec, MacroVectorEnv
+from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv
 from hrlp.train import TrainConfig, load_policy, train
 
 SEEING = {"observe_capsule": True, "observe_claw": True, "observe_clearance": True}
@@ -46,21 +47,21 @@ def test_a_skill_records_the_features_its_task_observed_and_acts_on_them_like_th
     np.testing.assert_array_equal(skill.features_of([env.unwrapped.physics])[0], obs[24:])
     policy, normalizer, _ = load_policy(run / "checkpoint")
     expected = np.clip(policy.act_numpy(normalizer(obs, update=False).astype(np.float32), deterministic=True), -1, 1)
-    got = skill.act(obs[None, :24], np.zeros((1, 0)), obs[None, 24:])
+    got = skill.torques(obs[None, :24], np.zeros((1, 0)), obs[None, 24:])
     np.testing.assert_allclose(got[0], expected, atol=1e-5)
     other = obs[None, 24:] + np.linspace(-1.0, 1.0, F)[None]
-    assert not np.allclose(skill.act(obs[None, :24], np.zeros((1, 0)), other), got)  # the features reach the network
+    assert not np.allclose(skill.torques(obs[None, :24], np.zeros((1, 0)), other), got)  # the features reach the network
 
 
 def test_a_skill_without_the_features_it_reads_is_refused_with_one_line(seeing):
     skill = seeing[1].load("seeing")
     names = "capsule_pose, claw_pose, arm_clearance"
     with pytest.raises(ValueError, match=rf"reads the observation features {names}; pass them \(\[N, 26\]\)"):
-        skill.act(np.zeros((2, 24)), np.zeros((2, 0)))
+        skill.torques(np.zeros((2, 24)), np.zeros((2, 0)))
     with pytest.raises(ValueError, match=rf"features \({names}\) must have shape \[2, 26\], got \[2, 6\]"):
-        skill.act(np.zeros((2, 24)), np.zeros((2, 0)), np.zeros((2, 6)))
+        skill.torques(np.zeros((2, 24)), np.zeros((2, 0)), np.zeros((2, 6)))
     with pytest.raises(ValueError, match="NaN or inf"):
-        skill.act(np.zeros((1, 24)), np.zeros((1, 0)), np.full((1, F), np.nan))
+        skill.torques(np.zeros((1, 24)), np.zeros((1, 0)), np.full((1, F), np.nan))
 
 
 def test_a_manager_gives_the_skill_the_features_its_task_observed(seeing):
@@ -76,7 +77,7 @@ def test_a_manager_gives_the_skill_the_features_its_task_observed(seeing):
         obs, _, term, trunc, info = manager.step((0, np.zeros(0)))
         total = 0.0
         for _ in range(info["tau"]):
-            low, r, *_ = alone.step(skill.act(low[None, :24], np.zeros((1, 0)), low[None, 24:])[0])
+            low, r, *_ = alone.step(skill.torques(low[None, :24], np.zeros((1, 0)), low[None, 24:])[0])
             total += r
         np.testing.assert_array_equal(obs, low[:24])
         assert info["task_reward"] == pytest.approx(total, rel=1e-12)

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from hrlp.checkpoint import CheckpointError
+from hrlp.config import Handover, MacroSpec, MicroAction
 from hrlp.envs import make
 from hrlp.skills import PARAM_SPECS, ParamSpec, SkillLibrary, load_skill
-from hrlp.skills.macro_env import Handover, MacroEnv, MacroSpec, MicroAction, step_macros
+from hrlp.skills.macro_env import MacroEnv, step_macros
 from hrlp.skills.skill import HANDOVER_POINT, HANDOVER_TARGET
 
 H, C = slice(18, 21), slice(21, 24)
@@ -40,7 +41,7 @@ def test_relative_goals_are_offsets_from_the_capsule_at_the_macro_start(shipped)
     macro.step((1, np.zeros(0), block))
     low, low_obs = _twin(4)
     for _ in range(6):  # the capsule moves under the Reacher, the goal stays where it was at the macro's start
-        low_obs, *_ = low.step(shipped[1].act(low_obs[None, :24], goal[None])[0])
+        low_obs, *_ = low.step(shipped[1].torques(low_obs[None, :24], goal[None])[0])
     np.testing.assert_allclose(macro.env.physics.hand, low.physics.hand)
 
 
@@ -53,7 +54,7 @@ def test_the_goal_is_raised_until_the_hand_is_above_it_and_the_claw_is_held_open
     macro.step((1, np.zeros(0), macro.block(1, far)))
     low, low_obs = _twin(1)
     for _ in range(5):
-        a = shipped[1].act(low_obs[None, :24], np.add(far, (0.0, 0.0, 0.11))[None])[0]
+        a = shipped[1].torques(low_obs[None, :24], np.add(far, (0.0, 0.0, 0.11))[None])[0]
         a[7:] = (-0.3, 0.3)
         low_obs, *_ = low.step(a)
     np.testing.assert_allclose(macro.env.physics.hand, low.physics.hand)
@@ -62,7 +63,7 @@ def test_the_goal_is_raised_until_the_hand_is_above_it_and_the_claw_is_held_open
     above = np.concatenate([obs[H][:2], [obs[H][2] - 0.04]])
     macro.step((1, np.zeros(0), macro.block(1, above)))
     for _ in range(5):
-        a = shipped[1].act(low_obs[None, :24], above[None])[0]
+        a = shipped[1].torques(low_obs[None, :24], above[None])[0]
         a[7:] = (-0.3, 0.3)
         low_obs, *_ = low.step(a)
     np.testing.assert_allclose(macro.env.physics.hand, low.physics.hand)
@@ -109,7 +110,7 @@ def test_mover_targets_relative_to_the_tasks_target_reach_the_mover_as_that_poin
     low_obs, _ = low.reset(seed=2)
     macro.step((2, np.zeros(3), np.zeros(0), block))
     for _ in range(15):
-        low_obs, *_ = low.step(skills[2].act(low_obs[None, :24], (obs[24:27] + offset)[None])[0])
+        low_obs, *_ = low.step(skills[2].torques(low_obs[None, :24], (obs[24:27] + offset)[None])[0])
     np.testing.assert_allclose(macro.env.physics.qpos, low.physics.qpos)
     # A task without a target has nothing to be relative to: refused when the Manager's environment is made.
     with pytest.raises(ValueError, match="needs a task that observes a target"):

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
+from hrlp.config import MicroAction
 from hrlp.envs import make
 from hrlp.skills import SkillLibrary
-from hrlp.skills.macro_env import MacroEnv, MicroAction
+from hrlp.skills.macro_env import MacroEnv
 from hrlp.train import TrainConfig, train
 
 
@@ -44,7 +45,7 @@ def test_a_macro_step_is_k_low_level_steps_with_discounted_reward(skills):
     _, r, _, _, info = macro.step((1, np.zeros(0), block))
     expected, g = 0.0, 1.0
     for _ in range(k):  # the same skill, driven by hand on a twin environment
-        low_obs, lr, *_ = low.step(skills[1].act(low_obs[None, :24], goal[None])[0])
+        low_obs, lr, *_ = low.step(skills[1].torques(low_obs[None, :24], goal[None])[0])
         expected += g * lr
         g *= gamma
     assert info["tau"] == k and info["discount"] == pytest.approx(gamma**k) and info["macro"] == "reacher"

@@ -9,11 +9,12 @@ import torch
 from typer.testing import CliRunner
 
 from hrlp.cli import app
+from hrlp.config import MacroSpec, MicroAction
 from hrlp.envs import make
 from hrlp.evaluate import evaluate_run
 from hrlp.policies.mlp import HierarchicalPolicy
 from hrlp.skills import SkillLibrary
-from hrlp.skills.macro_env import MacroEnv, MacroSpec, MicroAction, step_macros
+from hrlp.skills.macro_env import MacroEnv, step_macros
 from hrlp.train import TrainConfig, Trainer, load_trained, train
 
 

@@ -29,7 +29,7 @@ def test_a_skill_acts_like_the_trained_policy_on_the_same_observation(reacher_ru
     policy, normalizer, _ = load_policy(reacher_run / "checkpoint")
     expected = np.clip(policy.act_numpy(normalizer(obs, update=False).astype(np.float32), deterministic=True), -1, 1)
     # The Manager passes the goal as the skill's parameter; it enters the observation at 24:27.
-    got = skill.act(obs[None, :24], env.task.goal[None])
+    got = skill.torques(obs[None, :24], env.task.goal[None])
     np.testing.assert_allclose(got[0], expected, atol=1e-5)
     assert not any(p.requires_grad for p in skill.policy.parameters())
 
@@ -39,9 +39,9 @@ def test_skill_inputs_are_checked(reacher_run, tmp_path):
     lib.add(reacher_run, "r")
     skill = lib.load("r")
     with pytest.raises(ValueError, match="NaN or inf"):
-        skill.act(np.zeros((1, 24)), np.array([[np.nan, 0, 0]]))
+        skill.torques(np.zeros((1, 24)), np.array([[np.nan, 0, 0]]))
     with pytest.raises(ValueError, match=r"shape \[N, >=24\]"):
-        skill.act(np.zeros((1, 20)), np.zeros((1, 3)))
+        skill.torques(np.zeros((1, 20)), np.zeros((1, 3)))
 
 
 def test_library_errors_tampering_and_names(reacher_run, tmp_path):
@@ -103,7 +103,7 @@ def test_shipped_skills_load_frozen_and_the_reacher_reaches():
     for seed in (0, 1):
         obs, _ = env.reset(seed=seed)
         for _ in range(300):
-            obs, _, _, truncated, info = env.step(reacher.act(obs[None, :24], env.task.goal[None])[0])
+            obs, _, _, truncated, info = env.step(reacher.torques(obs[None, :24], env.task.goal[None])[0])
             if truncated:
                 break
         assert info["success"], seed
@@ -125,6 +125,6 @@ def test_the_shipped_noised_mover_moves_the_capsule_towards_its_target():
             total += info["target_dist_sum"]
         return total / 10
 
-    moved = target_dist_sum(lambda obs: mover.act(obs[None, :24], env.physics.target[None])[0])
+    moved = target_dist_sum(lambda obs: mover.torques(obs[None, :24], env.physics.target[None])[0])
     still = target_dist_sum(lambda obs: np.zeros(9))
     assert moved > still + 2.0  # measured: -9.98 against -13.14 with zero torques

@@ -30,7 +30,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS, ArmPhysics, PhysicsConfig
+from hrlp.envs.physics import BASE_OBS_DIM, BASE_PARTS, N_JOINTS, OBS_FEATURES, TARGET_PART, ArmPhysics, PhysicsConfig
 from hrlp.envs.tasks import Task
 
 log = logging.getLogger(__name__)
@@ -195,6 +195,20 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
         self._rng = np.random.default_rng()
         self._rng.bit_generator.state = state["rng"]
         self.task.set_episode_state({k: np.asarray(v) for k, v in state["task"].items()})
+
+    # --- named parts, for skills (hrlp.skills.core) ----------------------------------------------
+    @property
+    def observation_parts(self) -> dict[str, slice]:
+        """The observation's named parts: :data:`~hrlp.envs.physics.BASE_PARTS`, and ``target`` for a task that
+        observes one."""
+        return {**BASE_PARTS, "target": TARGET_PART} if self.task.observes_target else dict(BASE_PARTS)
+
+    #: Parts measured outside the observation (:meth:`measure`): the named features a skill may read.
+    measurable: tuple[str, ...] = tuple(OBS_FEATURES)
+
+    def measure(self, name: str) -> np.ndarray:
+        """The named feature (:data:`~hrlp.envs.physics.OBS_FEATURES`) of the current state."""
+        return self.physics.feature(name)
 
     # --- internals ----------------------------------------------------------------------------
     def _observe(self) -> np.ndarray:

@@ -35,12 +35,17 @@ def parameterised_dims(space: gym.Space) -> tuple[int, ...]:
 
 
 def check_spaces(task: str, observation_space: gym.Space, action_space: gym.Space) -> None:
-    """Raise ValueError naming ``task`` unless hrlp's policies can read its observations (a Box) and produce its actions
-    (Box, Discrete or a parameterised space: flat or nested Tuple, or OneOf, see :mod:`hrlp.envs.actions`)."""
-    if not isinstance(observation_space, gym.spaces.Box) or observation_space.shape is None:
+    """Raise ValueError naming ``task`` unless hrlp's policies can read its observations (a Box, or a Dict of Boxes such
+    as a goal-conditioned environment's, flattened in its key order) and produce its actions (Box, Discrete or a
+    parameterised space: flat or nested Tuple, or OneOf, see :mod:`hrlp.envs.actions`)."""
+    if isinstance(observation_space, gym.spaces.Dict):
+        if bad := [k for k, s in observation_space.spaces.items() if not isinstance(s, gym.spaces.Box)]:
+            raise ValueError(f"{task}: unsupported observation part(s) {', '.join(map(repr, bad))}: hrlp reads a Dict "
+                             "observation whose parts are all Boxes of numbers")  # fmt: skip
+    elif not isinstance(observation_space, gym.spaces.Box) or observation_space.shape is None:
         raise ValueError(f"{task}: unsupported observation space {observation_space}: hrlp's policies read a Box of "
-                         "numbers (wrap the environment so that it observes one, e.g. a one-hot Box for a Discrete "
-                         "state)")  # fmt: skip
+                         "numbers or a Dict of them (wrap the environment so that it observes one, e.g. a one-hot Box "
+                         "for a Discrete state)")  # fmt: skip
     if not isinstance(action_space, gym.spaces.Box | gym.spaces.Discrete):
         from hrlp.envs.actions import parameter_blocks
 

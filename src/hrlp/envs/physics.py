@@ -36,6 +36,17 @@ N_JOINTS = len(JOINTS)
 ARM_JOINTS = 7
 #: Base observation size (paper, Appendix B.1): 9 angles, 9 velocities, hand H, capsule C.
 BASE_OBS_DIM = 2 * N_JOINTS + 3 + 3
+#: Named parts of the base observation (what a skill reads by name, :class:`hrlp.skills.core.ObsLayout`): ``base`` is
+#: all 24 numbers, the others its pieces.
+BASE_PARTS: dict[str, slice] = {
+    "base": slice(0, BASE_OBS_DIM),
+    "joint_angles": slice(0, N_JOINTS),
+    "joint_velocities": slice(N_JOINTS, 2 * N_JOINTS),
+    "hand": slice(2 * N_JOINTS, 2 * N_JOINTS + 3),
+    "capsule": slice(2 * N_JOINTS + 3, BASE_OBS_DIM),
+}
+#: Where a task that observes a target T (:attr:`hrlp.envs.tasks.Task.observes_target`) puts it.
+TARGET_PART = slice(BASE_OBS_DIM, BASE_OBS_DIM + 3)
 #: Named observation features beyond the 24 base numbers, by name: their width. A task may append them to its
 #: observation (``GripperTask.observe_capsule``) and a skill trained on it reads them wherever it acts, computed from
 #: the physics by :meth:`ArmPhysics.feature` (one world) or :func:`hrlp.envs.batched.feature_rows` (N worlds).

@@ -150,6 +150,16 @@ def check_gamma(gamma: object, who: str) -> float:
     return float(gamma)
 
 
+def info_success(info: Mapping[str, Any]) -> bool | None:
+    """An environment's own success test from one step's ``info``: hrlp's ``success``, or Gymnasium-Robotics'
+    ``is_success`` (a float 0 or 1); None where it reports neither."""
+    if "success" in info:
+        return bool(info["success"])
+    if "is_success" in info:
+        return bool(info["is_success"])
+    return None
+
+
 def info_arrays(infos: Sequence[Mapping[str, Any]], skip: frozenset[str] = frozenset({"success"})) -> dict[str, np.ndarray]:
     """Per-environment info dicts as arrays ``[N]``, one per key that any of them reports as a scalar.
 
@@ -283,7 +293,7 @@ class SerialVectorEnv:
             o, r, term, trunc, info = env.step(decoded[i])
             next_obs[i], rewards[i] = np.ravel(o), r
             terminated[i], truncated[i] = term, trunc and not term
-            success[i] = bool(info.get("success", False))
+            success[i] = bool(info_success(info))
             infos.append(info)
         obs = next_obs.copy()
         for i in np.flatnonzero(terminated | truncated):
@@ -291,7 +301,7 @@ class SerialVectorEnv:
         physics = physics_seconds(self.envs) - physics0
         self._obs = obs
         arrays = info_arrays(infos)
-        reported = np.array(["success" in info for info in infos])
+        reported = np.array([info_success(info) is not None for info in infos])
         if not reported.all():
             arrays[NO_SUCCESS_TEST] = ~reported
         return VectorStep(
@@ -340,5 +350,6 @@ __all__ = [
     "check_num_envs",
     "flat_action_dim",
     "info_arrays",
+    "info_success",
     "physics_seconds",
 ]

@@ -13,9 +13,9 @@ from pathlib import Path
 from rich.console import Console
 
 from hrlp.algos.trpo import TRPOConfig
-from hrlp.config import PAPER_SETTINGS, with_settings
-from hrlp.skills.macro_env import Handover, MacroSpec
+from hrlp.config import PAPER_SETTINGS, Handover, MacroSpec, with_settings
 from hrlp.train import TrainConfig
+from hrlp.training.sources import resolve_skills
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ def run_demo(out_dir: Path, steps: int = DEMO_STEPS, seed: int = 0, episodes: in
         saved = read_run_checkpoint(out_dir / "checkpoint")[2]
         if dataclasses.replace(saved, steps=cfg.steps) != cfg:
             raise ValueError(f"{out_dir} holds a different run; choose another --out-dir")
-    cfg.macro.load_skills()  # a missing shipped skill fails here, before any compute
+    resolve_skills(cfg.macro.skills, cfg.macro.library)  # a missing shipped skill fails here, before any compute
     train_with_progress(cfg, out_dir, resume, console, "Manager on ReachAndGrip1")
     ev = evaluate_run(out_dir, episodes=episodes)
     video = out_dir / "demo.mp4"

@@ -18,9 +18,8 @@ import itertools
 import math
 from dataclasses import dataclass, field, replace
 
-from hrlp.config import PAPER_SETTINGS, with_settings
+from hrlp.config import PAPER_SETTINGS, Handover, MacroSpec, MicroAction, with_settings
 from hrlp.skills.imitate import ImitationConfig
-from hrlp.skills.macro_env import Handover, MacroSpec, MicroAction
 from hrlp.train import TrainConfig
 
 #: The shipped Gripper skill's start set (its recipe: the ``shipped-skills`` preset).

@@ -35,6 +35,7 @@ from hrlp.checkpoint import checkpoint_exists
 from hrlp.experiments.presets import PRESETS, Preset
 from hrlp.skills.imitate import ImitationConfig
 from hrlp.train import TrainConfig
+from hrlp.training.sources import resolve_skills
 
 BACKENDS = ("process", "ray")
 
@@ -270,7 +271,7 @@ def reproduce(
         preset = preset.with_budget(budget)
     jobs = plan(preset, out, None if seeds is None else tuple(range(seeds)))
     for spec in {j.config.macro for j in jobs if j.config.macro is not None}:
-        spec.load_skills()  # a missing skill fails now
+        resolve_skills(spec.skills, spec.library)  # a missing skill fails now
     results: list[dict[str, Any]] = []
     if backend == "ray":
         import ray

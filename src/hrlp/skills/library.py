@@ -30,8 +30,19 @@ from typing import Any
 
 import torch
 
-from hrlp.checkpoint import CheckpointError, ReadLimits, TensorInfo, load_module, read_checkpoint, save_checkpoint
+from hrlp.checkpoint import (
+    META_FILE,
+    CheckpointError,
+    ReadLimits,
+    TensorInfo,
+    load_module,
+    read_checkpoint,
+    read_run_checkpoint,
+    require_keys,
+    save_checkpoint,
+)
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
+from hrlp.envs.registry import TASKS
 from hrlp.policies.mlp import GaussianPolicy
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.skills.skill import PARAM_SPECS, Initiation, ParamSpec, Skill, check_features, features_dim, initiation_for
@@ -91,9 +102,6 @@ def load_skill(name: str, library: str | Path | None = None) -> Skill:
 
 def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     """The trained policy's tensors and the facts about it, from a run directory written by ``hrlp train``."""
-    from hrlp.checkpoint import META_FILE, require_keys
-    from hrlp.train import read_run_checkpoint  # here: hrlp.train imports the skills package
-
     tensors, meta, cfg = read_run_checkpoint(Path(run_dir) / "checkpoint")
     if meta.get("kind", "flat") != "flat":
         raise ValueError(f"{run_dir}: a skill is a flat policy; this run trained a {meta['kind']}")
@@ -103,8 +111,6 @@ def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     require_keys(meta, {"obs_dim": int, "act_dim": int}, Path(run_dir) / "checkpoint" / META_FILE)
     features: tuple[str, ...] = ()
     if meta["obs_dim"] != BASE_OBS_DIM + PARAM_SPECS[task].dim:  # the task observed more: which named features
-        from hrlp.envs.registry import TASKS
-
         features = TASKS[task].build(**cfg.task_kwargs).observed_features
         if meta["obs_dim"] != (want := BASE_OBS_DIM + PARAM_SPECS[task].dim + features_dim(features)):
             named = ", ".join(features) or "none"

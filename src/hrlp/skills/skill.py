@@ -19,6 +19,8 @@ import numpy as np
 from hrlp.envs.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
+from hrlp.skills.core import ObsView, ParamBox
+from hrlp.skills.core import Skill as GenericSkill
 
 #: Named frames a parameter vector can be expressed in: the slice of the observation that holds the frame's origin
 #: (None for the world frame). A parameter in a body's frame is an offset from that body's position. 'hand' and
@@ -61,6 +63,11 @@ class ParamSpec:
         base = np.asarray(base_obs, dtype=np.float64)
         where = FRAMES[self.frame]
         return np.zeros((base.shape[0], self.dim)) if where is None else base[:, where].copy()
+
+    def box(self) -> ParamBox:
+        """The generic parameter box (:class:`~hrlp.skills.core.ParamBox`): the same bounds, the frame as the part of
+        the arm's observation it names (None for 'world')."""
+        return ParamBox(self.low, self.high, self.meaning, None if self.frame == "world" else self.frame)
 
     def to_json(self) -> dict[str, Any]:
         """JSON-serialisable form."""
@@ -179,9 +186,9 @@ def _is_number(v: object) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool) and bool(np.isfinite(v))
 
 
-class Skill:
-    """A frozen skill: ``act(base_obs [N, 24], params [N, dim], features [N, F]) -> torques [N, 9]`` (the policy's mean
-    action).
+class Skill(GenericSkill):
+    """A frozen arm skill: ``torques(base_obs [N, 24], params [N, dim], features [N, F]) -> [N, 9]`` (the policy's mean
+    action); as a generic skill (:class:`hrlp.skills.core.Skill`) it reads the parts ``base`` and its features.
 
     Attributes:
         name: the skill's name in the library.
@@ -210,6 +217,8 @@ class Skill:
         self._mean = NumpyMLP(policy.mean_net)
         self.feature_dim = features_dim(self.features)
         self.obs_dim = BASE_OBS_DIM + param.dim + self.feature_dim
+        self.params = param.box()
+        self.reads = ("base", *self.features)
 
     def observation(self, base_obs: np.ndarray, params: np.ndarray, features: np.ndarray | None = None) -> np.ndarray:
         """The skill's own observation: the 24 base numbers, its parameters, then its features (in the order of
@@ -235,7 +244,16 @@ class Skill:
             return None
         return np.stack([np.concatenate([p.feature(f) for f in self.features]) for p in physics])
 
-    def act(self, base_obs: np.ndarray, params: np.ndarray, features: np.ndarray | None = None) -> np.ndarray:
+    def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
+        """The generic skill's actions: :meth:`torques` of the part ``base`` and the features read by name."""
+        seen = np.concatenate([obs[f] for f in self.features], axis=1) if self.features else None
+        return self.torques(obs["base"], params, seen)
+
+    def initiable(self, obs: ObsView) -> np.ndarray:
+        """Whether each state is in :attr:`initiation`."""
+        return self.initiation.holds(obs["base"])
+
+    def torques(self, base_obs: np.ndarray, params: np.ndarray, features: np.ndarray | None = None) -> np.ndarray:
         """Torques in [-1, 1] for ``N`` states: ``[N, 24] x [N, dim] (x [N, feature_dim]) -> [N, 9]``; rejects NaN/inf
         inputs, and missing or misshapen features for a skill that reads them."""
         obs = self.observation(base_obs, params, features)

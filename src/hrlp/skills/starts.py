@@ -66,7 +66,7 @@ def record_grip_starts(
     else:
 
         def act(o: np.ndarray) -> np.ndarray:
-            return gripper.act(o, np.zeros((num_envs, 0)), gripper.features_of([env.unwrapped.physics for env in envs]))
+            return gripper.torques(o, np.zeros((num_envs, 0)), gripper.features_of([env.unwrapped.physics for env in envs]))
 
     traj: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in envs]
     gripped = [False] * num_envs

@@ -11,64 +11,83 @@ from typing import Any
 
 import gymnasium as gym
 
-from hrlp.config import TrainConfig
+from hrlp.config import MacroSpec, TrainConfig
 from hrlp.envs.batched import BatchedFactory, make_batched
 from hrlp.envs.registry import ArmEnvFactory
 from hrlp.envs.vector import VectorConstructor, VectorEnv
-from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroSpec
+from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv
+from hrlp.training.sources import resolve_skills
 
 
 def env_factory(
     task: str, episode_steps: int | None = None, macro: MacroSpec | None = None, gamma: float = 0.99, **kwargs: Any
 ) -> Callable[[], gym.Env]:
-    """A constructor for ``task`` (an hrlp task name/id or a Gymnasium id), wrapped in a :class:`MacroEnv` of
-    ``macro``'s skills (loaded once, shared, frozen) for a Manager. Raises ValueError, one line, before any compute,
-    for an unknown task, an unknown or invalid argument, a missing optional dependency, an unsupported space
-    (:func:`hrlp.envs.check.probe_task`) or a missing skill; for a Gymnasium id, ``episode_steps`` is its time limit,
-    and a parameterised action space (flat or nested Tuple, OneOf) is presented in the policy's canonical form with
-    parameters in [-1, 1] (:class:`hrlp.envs.actions.NormalisedParameters`).
-    The constructor can be pickled (sampler worker processes rebuild it; a Manager's skills are then loaded again
-    there, from the same files)."""
+    """A constructor for ``task`` (an hrlp task name/id, a Gymnasium id or ``MODULE:ID``), wrapped in a :class:`MacroEnv`
+    of ``macro``'s skills (resolved once, shared, frozen: :mod:`hrlp.training.sources`) for a Manager. Raises
+    ValueError, one line, before any compute, for an unknown task, an unknown or invalid argument, a missing optional
+    dependency, an unsupported space (:func:`hrlp.envs.check.probe_task`) or a bad skill reference; for a Gymnasium id,
+    ``episode_steps`` is its time limit, a Dict observation is flattened in its key order (for a flat policy; a
+    Manager's skills read its parts by name), and a parameterised action space (flat or nested Tuple, OneOf) is
+    presented in the policy's canonical form with parameters in [-1, 1] (:class:`hrlp.envs.actions.NormalisedParameters`).
+    The constructor can be pickled (sampler worker processes rebuild it; a Manager's skills are then resolved again
+    there, from the same references)."""
     from hrlp.envs import TASKS
     from hrlp.envs.actions import is_parameterised, make_normalised
     from hrlp.envs.check import gym_kwargs, probe_task
 
     name = task.removeprefix("hrlp/").removesuffix("-v0")
-    if name not in TASKS and macro is not None:
-        raise ValueError(f"{task}: a Manager commands arm skills, so its task must be an hrlp task (see 'hrlp tasks')")
-    _, action_space = probe_task(task, episode_steps, **kwargs)  # validate arguments and spaces now, before any compute
+    observation_space, action_space = probe_task(task, episode_steps, **kwargs)  # validate now, before any compute
     if name in TASKS:
         kw = dict(kwargs)
         if episode_steps is not None:
             kw["episode_steps"] = episode_steps
         if macro is None:
             return ArmEnvFactory(name, kw)
-        return _MacroFactory(name, kw, macro, gamma, macro.load_skills())
+        return _MacroFactory(name, kw, macro, gamma, resolve_skills(macro.skills, macro.library))
+    gkw = gym_kwargs(task, episode_steps, kwargs)
+    if macro is not None:
+        if is_parameterised(action_space) or not isinstance(action_space, gym.spaces.Box):
+            raise ValueError(f"{task}: a Manager's skills emit Box actions; this environment's action space is {action_space}")
+        return _MacroFactory(task, gkw, macro, gamma, resolve_skills(macro.skills, macro.library), gym_id=True)
     if is_parameterised(action_space):  # the policy acts in [-1, 1] per bounded parameter (hrlp.envs.actions)
-        return functools.partial(make_normalised, task, **gym_kwargs(task, episode_steps, kwargs))
-    return functools.partial(gym.make, task, **gym_kwargs(task, episode_steps, kwargs))
+        return functools.partial(make_normalised, task, **gkw)
+    if isinstance(observation_space, gym.spaces.Dict):
+        return functools.partial(_flattened, task, **gkw)
+    return functools.partial(gym.make, task, **gkw)
+
+
+def _flattened(task: str, **kwargs: Any) -> gym.Env:
+    """``gymnasium.make(task)`` with its Dict observation flattened in its key order (a flat policy reads a Box)."""
+    return gym.wrappers.FlattenObservation(gym.make(task, **kwargs))
 
 
 class _MacroFactory:
-    """Builds a Manager's environment; its skills are loaded once per process (not pickled: a worker process reloads
-    them from disk and checks they are the same skills, by content hash)."""
+    """Builds a Manager's environment; its skills are resolved once per process (not pickled: a worker process resolves
+    them again from their references and checks library skills are the same, by content hash)."""
 
-    def __init__(self, name: str, kwargs: dict[str, Any], macro: MacroSpec, gamma: float, skills: list) -> None:
+    def __init__(self, name: str, kwargs: dict[str, Any], macro: MacroSpec, gamma: float, skills: list,
+                 gym_id: bool = False) -> None:  # fmt: skip
         self.name, self.kwargs, self.macro, self.gamma, self._skills = name, kwargs, macro, gamma, skills
-        self.hashes = {s.name: s.content_hash for s in skills}
+        self.gym_id = gym_id
+        self.hashes = skill_hashes(skills)
 
     def __call__(self) -> MacroEnv:
         from hrlp.envs import make
 
         if self._skills is None:
-            self._skills = self.macro.load_skills()
-            check_skill_hashes(self.hashes, {s.name: s.content_hash for s in self._skills}, Path("skill library"))
-        return MacroEnv(
-            make(self.name, **self.kwargs), self._skills, self.macro.k, self.macro.micro, self.gamma, self.macro.handover
-        )
+            self._skills = resolve_skills(self.macro.skills, self.macro.library)
+            check_skill_hashes(self.hashes, skill_hashes(self._skills), Path("skill library"))
+        low = gym.make(self.name, **self.kwargs) if self.gym_id else make(self.name, **self.kwargs)
+        m = self.macro
+        return MacroEnv(low, self._skills, m.k, m.micro, self.gamma, m.handover, m.chain)
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_skills": None}
+
+
+def skill_hashes(skills: list) -> dict[str, str]:
+    """The content hash of each skill that has one (a library skill's weights), by name."""
+    return {s.name: s.content_hash for s in skills if isinstance(getattr(s, "content_hash", None), str)}
 
 
 class _BatchedMacroFactory(_MacroFactory, VectorConstructor):
@@ -79,7 +98,7 @@ class _BatchedMacroFactory(_MacroFactory, VectorConstructor):
         if gamma != self.gamma:
             raise ValueError(f"the Manager's environments discount by {self.gamma}, not {gamma}")
         layout = self()
-        features = tuple(dict.fromkeys(f for s in layout.skills for f in s.features))  # what the skills read
+        features = tuple(dict.fromkeys(f for s in layout.skills for f in getattr(s, "features", ())))  # what skills read
         return BatchedMacroVectorEnv(make_batched(self.name, n, features=features, **self.kwargs), layout)
 
 
@@ -95,7 +114,7 @@ def batched_factory(factory: Callable[[], gym.Env]) -> VectorConstructor:
     """The batched backend's version of :func:`env_factory`'s constructor of an hrlp arm task (flat or a Manager's):
     the same environment built alone, and ``n`` of them stepped as one (:class:`~hrlp.envs.vector.VectorConstructor`).
     Raises ValueError for any other constructor."""
-    if isinstance(factory, _MacroFactory):
+    if isinstance(factory, _MacroFactory) and not factory.gym_id:
         return _BatchedMacroFactory(factory.name, factory.kwargs, factory.macro, factory.gamma, factory._skills)
     if isinstance(factory, ArmEnvFactory):
         return BatchedFactory(factory.name, factory.kwargs)

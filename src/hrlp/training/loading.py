@@ -15,10 +15,9 @@ import numpy as np
 import torch
 
 from hrlp.checkpoint import (
-    META_FILE,
     CheckpointError,
-    load_checkpoint,
     load_module,
+    read_run_checkpoint,
 )
 from hrlp.config import TrainConfig
 from hrlp.envs.vector import VectorEnv
@@ -28,13 +27,16 @@ from hrlp.rollout import (
     action_decoder,
     build_vector_env,
 )
+from hrlp.skills.core import ObsLayout
 from hrlp.skills.macro_env import MacroEnv
+from hrlp.skills.policy import PolicySkill, param_box
 from hrlp.training.environments import (
     TRAINING_ONLY_TASK_ARGS,
     action_units,
     check_skill_hashes,
     env_factory,
     run_factory,
+    skill_hashes,
 )
 
 if TYPE_CHECKING:
@@ -78,27 +80,6 @@ def _trained_with(library: SkillLibrary, name: str) -> str:
     )
     hidden = ",".join(map(str, config.get("hidden") or ()))
     return f"; it was trained on {config['task']} with {args or 'no task arguments'} --hidden {hidden}"
-
-
-#: Keys of a training run's checkpoint meta that its readers need, with their JSON types. ``meta.json`` is not covered
-#: by the content hash (that is the weights' sha256; see :mod:`hrlp.checkpoint`), so they are checked on every read.
-RUN_META_KEYS: dict[str, type] = {"config": dict, "iteration": int, "env_steps": int, "normalizer": dict}
-
-
-def read_run_checkpoint(
-    directory: Path, more_keys: dict[str, type] | None = None
-) -> tuple[dict[str, torch.Tensor], dict[str, Any], TrainConfig]:
-    """``(tensors, meta, config)`` of a training run's checkpoint; a missing or mistyped key of :data:`RUN_META_KEYS`
-    (and ``more_keys``) or a malformed config raises :class:`~hrlp.checkpoint.CheckpointError` naming the file."""
-    tensors, meta = load_checkpoint(directory, required={**RUN_META_KEYS, **(more_keys or {})})
-    where = Path(directory) / META_FILE
-    try:
-        cfg = TrainConfig.from_json(meta["config"])
-    except KeyError as e:
-        raise CheckpointError(f"{where}: its 'config' has no {e}") from None
-    except (TypeError, ValueError, AttributeError) as e:
-        raise CheckpointError(f"{where}: its 'config' is malformed ({' '.join(str(e).split())})") from None
-    return tensors, meta, cfg
 
 
 def check_action_units(meta: dict[str, Any], units: str, where: Path) -> None:
@@ -164,7 +145,7 @@ def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, A
     env = env_factory(cfg.task, cfg.episode_steps, cfg.macro, cfg.advantage.gamma, **cfg.task_kwargs)()
     obs_dim = int(np.prod(env.observation_space.shape))
     if isinstance(env, MacroEnv):
-        check_skill_hashes(meta.get("skills", {}), {s.name: s.content_hash for s in env.skills}, directory)
+        check_skill_hashes(meta.get("skills", {}), skill_hashes(env.skills), directory)
     check_action_units(meta, action_units(env), directory)
     policy = policy_for_space(obs_dim, env.action_space, cfg.hidden)
     env.close()
@@ -174,3 +155,51 @@ def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, A
     )
     normalizer.freeze()
     return policy, normalizer, meta
+
+
+def from_run(run_dir: str | Path, name: str | None = None, *, param: str | None = "desired_goal", low: object = None,
+             high: object = None, k: int = 10, done_part: str | None = None,
+             done_within: float | None = None) -> PolicySkill:  # fmt: skip
+    """A skill from a flat run hrlp trained on any Gymnasium environment (its checkpoint: safetensors + JSON).
+
+    ``param`` names the part of the run's Dict observation its parameters replace (default ``desired_goal``; None
+    for none, and for a run on a Box observation, which reads the part ``observation``); ``low``/``high`` bound them
+    (default: that part's bounds in the run's environment, when finite); ``done_part``/``done_within`` end it early
+    (:class:`~hrlp.skills.policy.PolicySkill`)."""
+    run = Path(run_dir)
+    trained = load_trained(run)
+    if trained.config.macro is not None:
+        raise ValueError(f"{run}: a skill is a flat policy; this run trained a Manager")
+    env = trained.make_env()
+    space, action_space = _own_observation_space(env), env.action_space
+    env.close()
+    if not isinstance(action_space, gym.spaces.Box):
+        raise ValueError(f"{run}: a skill emits Box actions; this run's action space is {action_space}")
+    layout = ObsLayout.of_space(space)
+    parts = [(n, layout.width(n)) for n in layout.names]
+    if param is not None and param not in layout.names:
+        if isinstance(space, gym.spaces.Dict):
+            raise ValueError(f"{run}: no observation part {param!r} to take the parameters (its parts: "
+                             f"{', '.join(layout.names)}); name one with param=")  # fmt: skip
+        param = None
+    recorded = None
+    if param is not None and isinstance(space, gym.spaces.Dict):
+        sub = space.spaces[param]
+        recorded = (np.asarray(sub.low, np.float64).reshape(-1), np.asarray(sub.high, np.float64).reshape(-1))
+    box = param_box(low, high, layout.width(param) if param else 0, recorded, str(run))
+
+    def policy(x: np.ndarray) -> np.ndarray:
+        return trained.act_rows(x, None, True)
+
+    return PolicySkill(name or run.name, parts, param, box, policy, action_space.low, action_space.high, k=k,
+                       done_part=done_part, done_within=done_within)  # fmt: skip
+
+
+def _own_observation_space(env: gym.Env) -> gym.Space:
+    """The environment's observation space before hrlp flattened a Dict one (the first Dict space down its wrappers)."""
+    e: gym.Env | None = env
+    while e is not None:
+        if isinstance(e.observation_space, gym.spaces.Dict):
+            return e.observation_space
+        e = getattr(e, "env", None)
+    return env.observation_space

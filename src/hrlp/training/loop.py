@@ -27,6 +27,7 @@ from hrlp.checkpoint import (
     load_module,
     module_tensors,
     pack_generators,
+    read_run_checkpoint,
     save_checkpoint,
     unpack_generators,
 )
@@ -42,8 +43,8 @@ from hrlp.rollout import (
     mean_or_nan,
 )
 from hrlp.skills.macro_env import MacroEnv
-from hrlp.training.environments import action_units, check_skill_hashes, run_factory
-from hrlp.training.loading import check_action_units, read_run_checkpoint, warm_start
+from hrlp.training.environments import action_units, check_skill_hashes, run_factory, skill_hashes
+from hrlp.training.loading import check_action_units, warm_start
 from hrlp.training.logs import RunLogger, progress_line, truncate_log, update_stat
 
 
@@ -64,7 +65,7 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         probe = factory()
         obs_dim = int(np.prod(probe.observation_space.shape))
-        self.skill_hashes = {s.name: s.content_hash for s in probe.skills} if isinstance(probe, MacroEnv) else {}
+        self.skill_hashes = skill_hashes(probe.skills) if isinstance(probe, MacroEnv) else {}
         self.action_units = action_units(probe)
         self.policy = policy_for_space(obs_dim, probe.action_space, cfg.hidden, cfg.init_log_std)
         self.obs_dim = obs_dim

@@ -1,0 +1,182 @@
+"""The generic hierarchy on an environment outside hrlp (``goal_envs:PointGoal-v0``, a Dict observation): named parts,
+parameter boxes, one decision against stepping the environment by hand, early ends, initiation fall-backs, the three
+skill sources (a Python object, a run hrlp trained, a Stable-Baselines3 file) composed under one Manager that learns,
+and one line for every bad skill reference before any compute."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import goal_envs
+from hrlp.config import MacroSpec, MicroAction, TrainConfig
+from hrlp.evaluate import evaluate_run
+from hrlp.skills import DirectControl, ObsLayout, ObsView, ParamBox, ScriptedSkill
+from hrlp.skills.core import Hierarchy, decide, initiated
+from hrlp.skills.macro_env import MacroEnv
+from hrlp.train import env_factory, train_with_progress
+from hrlp.training.sources import resolve_skill
+
+TASK = "goal_envs:PointGoal-v0"
+
+
+def test_a_dict_layout_names_its_keys_in_flatten_order_and_a_view_reads_them():
+    space = gym.make(TASK).observation_space
+    layout = ObsLayout.of_space(space)
+    assert layout.parts == (("achieved_goal", 0, 2), ("desired_goal", 2, 4), ("observation", 4, 8)) and layout.dim == 8
+    obs = space.sample()
+    row = gym.spaces.flatten(space, obs)[None]
+    view = ObsView(row, layout, np.array([0]))
+    np.testing.assert_array_equal(view["desired_goal"][0], obs["desired_goal"])
+    with pytest.raises(KeyError, match="no observation part 'hand'"):
+        view["hand"]
+
+
+def test_a_box_layout_takes_the_parts_a_domain_names_or_one_whole_part():
+    box = gym.spaces.Box(-1, 1, (5,))
+    assert ObsLayout.of_space(box).parts == (("observation", 0, 5),)
+    assert ObsLayout.of_space(box, {"a": slice(0, 2), "all": slice(0, 5)}).parts == (("a", 0, 2), ("all", 0, 5))
+    with pytest.raises(ValueError, match="outside a row of 5"):
+        ObsLayout((("a", 3, 7),), 5)
+    with pytest.raises(ValueError, match="neither a Box nor a Dict"):
+        ObsLayout.of_space(gym.spaces.Discrete(3))
+
+
+def test_a_parameter_box_maps_minus_one_one_onto_its_bounds_and_back():
+    box = ParamBox.of([0.0, -2.0], [1.0, 2.0])
+    np.testing.assert_allclose(box.to_user(np.array([[-1.0, 1.0], [0.0, 0.0], [3.0, -3.0]])),
+                               [[0.0, 2.0], [0.5, 0.0], [1.0, -2.0]])  # fmt: skip
+    np.testing.assert_allclose(box.to_unit(np.array([0.25, 1.0])), [-0.5, 0.5])
+    for low, high, why in (([1.0], [0.0], "exceeds"), ([0.0], [np.inf], "finite"), ([0.0, 1.0], [1.0], "as many")):
+        with pytest.raises(ValueError, match=why):
+            ParamBox(tuple(low), tuple(high))
+
+
+def test_one_decision_of_direct_control_is_the_environment_stepped_with_the_same_actions():
+    macro = MacroEnv(gym.make(TASK), [], micro=MicroAction(duration=3), gamma=0.9)
+    twin = gym.make(TASK)
+    obs, _ = macro.reset(seed=4)
+    twin_obs, _ = twin.reset(seed=4)
+    np.testing.assert_array_equal(obs, gym.spaces.flatten(twin.observation_space, twin_obs))
+    action = np.array([0.5, -1.0])
+    obs, reward, *_, info = macro.step((0, action))
+    want, gamma = 0.0, 1.0
+    for _ in range(3):
+        twin_obs, r, *_ = twin.step(action)
+        want, gamma = want + gamma * r, gamma * 0.9
+    np.testing.assert_allclose(obs, gym.spaces.flatten(twin.observation_space, twin_obs))
+    assert reward == pytest.approx(want) and info["tau"] == 3 and info["discount"] == pytest.approx(0.9**3)
+
+
+def test_a_skill_that_says_it_is_done_ends_its_macro_action_early_and_reports_it():
+    macro = MacroEnv(gym.make(TASK), [goal_envs.reach], gamma=1.0)
+    obs, _ = macro.reset(seed=0)
+    here = obs[macro.layout.span("achieved_goal")]
+    _, _, _, _, info = macro.step((0, macro.block(0, here + 0.01)))  # 1 cm away: done after one step
+    assert info["tau"] == 1 and info["skill_done"]
+    _, _, term, _, info = macro.step((0, macro.block(0, -np.sign(here))))  # over 1 away each way: out of reach in 10
+    assert (info["tau"] == 10 or term) and not info["skill_done"]
+
+
+def test_parameters_in_a_frame_are_offsets_from_the_named_part_at_the_decision_start():
+    macro = MacroEnv(gym.make(TASK), [goal_envs.near_goal])
+    obs, _ = macro.reset(seed=2)
+    goal = obs[macro.layout.span("desired_goal")]
+    np.testing.assert_allclose(macro.parameters(0, np.array([1.0, -1.0])), goal + np.array([0.05, -0.05]))
+    macro.step((0, np.zeros(2)))
+    macro.step((0, np.zeros(2)))
+    got = macro._obs[macro.layout.span("achieved_goal")]
+    assert np.linalg.norm(got - goal) < 0.05
+
+
+def test_initiation_falls_back_to_the_nearest_available_skill_before_the_choice():
+    layout = ObsLayout((("x", 0, 1),), 1)
+    box = ParamBox((), ())
+
+    def skill(name: str, where: float | None) -> ScriptedSkill:
+        return ScriptedSkill(name, box, lambda o, p: np.zeros((len(o), 1)),
+                             initiable=None if where is None else (lambda o, w=where: o["x"][:, 0] < w))  # fmt: skip
+
+    skills = [skill("a", None), skill("b", 0.5), skill("c", 0.0), DirectControl(gym.spaces.Box(-1, 1, (1,)))]
+    x = np.array([[-1.0], [0.2], [0.7]])
+    view = ObsView(x, layout, np.arange(3))
+    assert initiated(skills, view, np.full(3, 2)).tolist() == [2, 1, 0]  # c where x < 0, else b where x < 0.5, else a
+    assert initiated(skills, view, np.full(3, 3)).tolist() == [3, 3, 3]  # direct control always runs
+    assert initiated(skills, view, np.full(3, 2), ran=np.array([-1, 2, 2])).tolist() == [2, 2, 2]  # a running skill goes on
+
+
+def test_decide_refuses_a_skill_whose_actions_do_not_fit_the_environment():
+    layout = ObsLayout((("x", 0, 1),), 1)
+    bad = ScriptedSkill("bad", ParamBox((), ()), lambda o, p: np.zeros((len(o), 3)))
+    h = Hierarchy((bad,), np.array([2]), layout, 1.0, 2)
+    with pytest.raises(ValueError, match=r"skill bad returned actions of shape \(1, 3\), expected \(1, 2\)"):
+        decide(h, np.zeros((1, 1)), np.zeros((1, 1)), lambda i, a: (np.zeros((len(i), 1)),) + (np.zeros(len(i)),) * 3)
+
+
+@pytest.mark.parametrize(
+    ("ref", "message"),
+    [
+        ("no_such_module_x:reach", "cannot import module 'no_such_module_x'"),
+        ("goal_envs:nothing", "module 'goal_envs' has no attribute 'nothing'"),
+        ("goal_envs:DT", "is a float, not an hrlp.skills.Skill"),
+        (":reach", "write a Python skill as MODULE:NAME"),
+        ("no-such-skill", "no skill 'no-such-skill'"),
+    ],
+)
+def test_a_bad_skill_reference_is_one_line_naming_it(ref, message):
+    with pytest.raises(ValueError, match=message) as e:
+        resolve_skill(ref)
+    assert "\n" not in str(e.value)
+
+
+def test_skills_that_do_not_fit_the_environment_are_refused_in_one_line_before_any_compute():
+    lacks = ScriptedSkill("lacks", ParamBox((), ()), lambda o, p: o["hand"], reads=("hand",))
+    with pytest.raises(ValueError, match=r"skill lacks reads the observation part\(s\) hand, which this environment lacks"):
+        MacroEnv(gym.make(TASK), [lacks])
+    with pytest.raises(ValueError, match="cannot import module 'no_such_module_x'"):  # at once, before any environment
+        env_factory(TASK, macro=MacroSpec(("goal_envs:reach", "no_such_module_x:reach")))
+    arm = env_factory("Gripper", macro=MacroSpec(("goal_envs:reach",)))  # the plane's skill on the arm
+    with pytest.raises(ValueError, match=r"skill reach reads the observation part\(s\) achieved_goal"):
+        arm()
+
+
+def _sources_module(tmp_path: Path) -> str:
+    """A user's module that makes a skill of each source: a flat run hrlp trained on PointGoal and a Stable-Baselines3
+    PPO file (both briefly trained: the Manager must learn which skill and parameters to use)."""
+    sb3 = pytest.importorskip("stable_baselines3")
+    model = sb3.PPO("MultiInputPolicy", gym.make(TASK), n_steps=64, batch_size=64, n_epochs=1, seed=0,
+                    policy_kwargs={"net_arch": [16]}, device="cpu")  # fmt: skip
+    model.learn(128)
+    model.save(tmp_path / "ppo_point.zip")
+    cfg = TrainConfig(task=TASK, steps=2_000, batch_steps=500, num_envs=4, seed=0, hidden=(16,))
+    train_with_progress(cfg, tmp_path / "flat")
+    (tmp_path / "my_skills.py").write_text(
+        textwrap.dedent(f"""
+        from hrlp.skills import from_sb3
+        from hrlp.training import from_run
+
+        def sb3_reach():
+            return from_sb3({str(tmp_path / "ppo_point.zip")!r}, "sb3_reach", low=-1, high=1, k=10)
+
+        def hrlp_reach():
+            return from_run({str(tmp_path / "flat")!r}, "hrlp_reach", k=10, done_part="achieved_goal", done_within=0.05)
+    """)
+    )
+    return "my_skills"
+
+
+def test_a_manager_composes_all_three_skill_sources_on_a_dict_environment_and_learns(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(tmp_path))
+    module = _sources_module(tmp_path)
+    refs = ("goal_envs:wander", f"{module}:sb3_reach", f"{module}:hrlp_reach", "goal_envs:near_goal")
+    macro = env_factory(TASK, macro=MacroSpec(refs))()
+    assert macro.names == ["wander", "sb3_reach", "hrlp_reach", "near_goal"] and macro.param_dims == (2, 2, 2, 2)
+    cfg = TrainConfig(task=TASK, steps=30_000, batch_steps=500, num_envs=8, seed=0, macro=MacroSpec(refs))
+    train_with_progress(cfg, tmp_path / "manager")
+    ev = evaluate_run(tmp_path / "manager", episodes=100)
+    assert ev.success is not None and ev.success.mean >= 0.9, ev
+    assert ev.macro_usage is not None and set(ev.macro_usage) == set(macro.names)
