@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from hrlp import bounds
 from hrlp.cli import app
 from hrlp.config import PAPER_SETTINGS, WORKERS_VARIABLE, TrainConfig, auto_workers, with_settings
-from hrlp.train import read_run_checkpoint, train
+from hrlp.train import read_run_checkpoint, resolve_config, train
 
 TINY = ["--steps", "64", "--batch-steps", "64", "--num-envs", "4", "--episode-steps", "10"]
 """A run of one iteration: 16 decisions per environment (the default fractions fit)."""
@@ -36,7 +36,7 @@ def test_the_defaults_are_the_fast_settings():
 
 def test_a_small_batch_works_with_the_defaults():
     cfg = TrainConfig(task="Reacher", batch_steps=200)  # 4 decisions per environment, 256 in all
-    assert cfg.steps_per_env == 4 and cfg.resolved().workers == 1  # $HRLP_WORKERS=1 in the tests
+    assert cfg.steps_per_env == 4 and resolve_config(cfg).workers == 1  # $HRLP_WORKERS=1 in the tests
     with pytest.raises(ValueError, match=r"value fraction 0\.25 keeps every 4th of the batch's 2 time steps"):
         TrainConfig(task="Reacher", batch_steps=128)
 
@@ -45,24 +45,24 @@ def test_the_worker_count_follows_the_cores_capped_by_the_environments(monkeypat
     monkeypatch.delenv(WORKERS_VARIABLE)
     monkeypatch.setattr(bounds, "cores", lambda: 3)
     assert auto_workers(64) == 3 and auto_workers(2) == 2 and auto_workers(1) == 1
-    assert TrainConfig(task="Reacher", num_envs=8, batch_steps=80).resolved().workers == 3
-    assert TrainConfig(task="Reacher", num_envs=2, batch_steps=80).resolved().workers == 2
+    assert resolve_config(TrainConfig(task="Reacher", num_envs=8, batch_steps=80)).workers == 3
+    assert resolve_config(TrainConfig(task="Reacher", num_envs=2, batch_steps=80)).workers == 2
     explicit = TrainConfig(task="Reacher", num_envs=8, batch_steps=80, workers=1)
-    assert explicit.resolved().workers == 1  # a count given is used as given
+    assert resolve_config(explicit).workers == 1  # a count given is used as given
 
 
 def test_the_backend_is_batched_for_arm_tasks_and_serial_elsewhere():
     from hrlp.config import MacroSpec
 
-    assert TrainConfig(task="Reacher").resolved().backend == "batched"
-    assert TrainConfig(task="hrlp/ReachAndGrip2-v0").resolved().backend == "batched"
+    assert resolve_config(TrainConfig(task="Reacher")).backend == "batched"
+    assert resolve_config(TrainConfig(task="hrlp/ReachAndGrip2-v0")).backend == "batched"
     manager = TrainConfig(task="ReachAndGrip1", macro=MacroSpec(skills=("gripper", "reacher"), k=10))
-    assert manager.resolved().backend == "batched"
-    assert TrainConfig(task="Pendulum-v1").resolved().backend == "serial"
-    assert TrainConfig(task="ParamMatch").resolved().backend == "serial"  # an hrlp task without the arm
-    assert TrainConfig(task="Reacher", backend="serial").resolved().backend == "serial"
+    assert resolve_config(manager).backend == "batched"
+    assert resolve_config(TrainConfig(task="Pendulum-v1")).backend == "serial"
+    assert resolve_config(TrainConfig(task="ParamMatch")).backend == "serial"  # an hrlp task without the arm
+    assert resolve_config(TrainConfig(task="Reacher", backend="serial")).backend == "serial"
     with pytest.raises(ValueError, match=r"^backend batched steps hrlp's arm tasks; Pendulum-v1 is not one: use serial"):
-        TrainConfig(task="Pendulum-v1", backend="batched").resolved()
+        resolve_config(TrainConfig(task="Pendulum-v1", backend="batched"))
     with pytest.raises(ValueError, match=r"^backend must be one of auto, batched, serial, got 'gpu'"):
         TrainConfig(task="Reacher", backend="gpu")
 
@@ -92,7 +92,7 @@ def test_hrlp_workers_sets_the_count(monkeypatch):
     monkeypatch.setattr(bounds, "cores", lambda: 3)  # max_processes: 6
     monkeypatch.setenv(WORKERS_VARIABLE, "5")
     assert auto_workers(64) == 5 and auto_workers(4) == 4
-    assert TrainConfig(task="Reacher", num_envs=8, batch_steps=80, workers=2).resolved().workers == 2
+    assert resolve_config(TrainConfig(task="Reacher", num_envs=8, batch_steps=80, workers=2)).workers == 2
     for value, match in (("two", "must be a positive integer, got 'two'"), ("0", "must be a positive integer, got 0"),
                          ("7", "must be at most 6, got 7")):  # fmt: skip
         monkeypatch.setenv(WORKERS_VARIABLE, value)

@@ -17,7 +17,7 @@ from hrlp.cli import app
 from hrlp.config import MacroSpec
 from hrlp.evaluate import evaluate_run, mean_interval, wilson_interval
 from hrlp.rollout import Sampler
-from hrlp.train import TrainConfig, Trainer, env_factory, load_policy, load_trained, train
+from hrlp.train import TrainConfig, Trainer, env_factory, load_policy, load_trained, resolve_config, train
 from hrlp.training.loop import batch_values
 
 TINY = {"steps": 400, "batch_steps": 200, "num_envs": 4, "episode_steps": 30}
@@ -37,8 +37,8 @@ def test_training_writes_logs_and_a_checkpoint_that_evaluates(tmp_path):
     assert len(logged) == 2 and float(logged[1]["env_steps"]) == 400
     assert any((tmp_path / "tb").iterdir())
     # The config as run: workers left to the machine (0) are recorded as the count used ($HRLP_WORKERS=1 in the tests).
-    assert TrainConfig.from_json(json.loads((tmp_path / "config.json").read_text())) == cfg.resolved() != cfg
-    assert cfg.resolved().workers == 1
+    assert TrainConfig.from_json(json.loads((tmp_path / "config.json").read_text())) == resolve_config(cfg) != cfg
+    assert resolve_config(cfg).workers == 1
     tensors, meta = load_checkpoint(tmp_path / "checkpoint")
     assert meta["iteration"] == 2 and "policy.log_std" in tensors
     ev = evaluate_run(tmp_path, episodes=3)

@@ -13,6 +13,9 @@ import math
 import os
 import socket
 
+DEFAULT_EPISODE_STEPS = 300
+"""The episode length of hrlp's arm tasks when none is given (the paper's: 300-500)."""
+
 MAX_SEED = 2**32 - 1
 """Seeds are 32-bit, as NumPy's and Gymnasium's conventions (and torch's, portably) expect."""
 

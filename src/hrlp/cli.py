@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import inspect
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -435,7 +436,7 @@ _CHECKS: dict[str, check.Check] = {  # the bounds checked while the options are 
     "steps": _STEPS_CHECK,
     "batch_steps": _BATCH_CHECK,
     "num_envs": check.count(1, bounds.MAX_NUM_ENVS, bounds.WHY_NUM_ENVS),
-    "workers": check.workers(0),  # 0: one per core (TrainConfig.resolved)
+    "workers": check.workers(0),  # 0: one per core (hrlp.training.environments.resolve_config)
     "seed": check.seed(),
     "episode_steps": check.count(1),
     "hidden": check.widths,
@@ -838,7 +839,8 @@ def _episode_length_defaults(ctx: typer.Context, task: str) -> str:
     suit 300-step episodes: on 1-10-decision episodes a 50,000-decision batch is a whole 20,000-episode budget. hrlp's
     own arm tasks keep the paper's settings whatever ``--episode-steps``."""
     from hrlp.envs import TASKS
-    from hrlp.envs.check import SHORT_EPISODE_SETTINGS, SHORT_EPISODE_STEPS, declared_episode_steps
+    from hrlp.envs.check import SHORT_EPISODE_SETTINGS, SHORT_EPISODE_STEPS
+    from hrlp.envs.registry import declared_episode_steps
 
     left_out = [name for name in SHORT_EPISODE_SETTINGS if not _given(ctx, name)]
     if not left_out or task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
@@ -907,7 +909,8 @@ def _check_task(task: str, episode_steps: int | None, task_arg: list[str] | None
     import gymnasium as gym
 
     from hrlp.envs import TASKS
-    from hrlp.envs.check import invalid_arguments_line, probe_task
+    from hrlp.envs.check import invalid_arguments_line
+    from hrlp.envs.registry import probe_task
 
     kwargs = parse_task_args(task_arg)
     name = task.removeprefix("hrlp/").removesuffix("-v0")
@@ -1074,10 +1077,12 @@ def _task_args_accessor() -> tuple[Any, Any]:
 
 
 def _setting_accessor(setting: _Setting) -> tuple[Any, Any]:
+    from hrlp.training.environments import resolve_config  # torch-free, but it builds the task registry
+
     if (setting.config, setting.field) == (TrainConfig, "workers"):  # 0: the count this machine gives, compared as such
-        return lambda c: c.workers, lambda c, v, p: dataclasses.replace(c, workers=v).resolved()
+        return lambda c: c.workers, lambda c, v, p: resolve_config(dataclasses.replace(c, workers=v))
     if (setting.config, setting.field) == (TrainConfig, "backend"):  # auto: the run's choice for its task
-        return lambda c: c.backend, lambda c, v, p: dataclasses.replace(c, backend=v).resolved()
+        return lambda c: c.backend, lambda c, v, p: resolve_config(dataclasses.replace(c, backend=v))
     if setting.config is TrainConfig:
         return _replace_top(setting.field)
     return _replace_nested(_NESTED[setting.config], setting.field)
@@ -1201,21 +1206,74 @@ def skills_show(name: Annotated[str, typer.Argument(help="Skill name.")], librar
 
 @skills_app.command("add")
 def skills_add(
-    run_dir: Annotated[Path, typer.Argument(help="A finished run of 'hrlp train' on a skill task.")],
+    run_dir: Annotated[Path, typer.Argument(help="A finished flat run of 'hrlp train' (an arm skill task or any env).")],
     name: Annotated[str, typer.Option(help="Name of the new skill.")],
-    k: Annotated[int, typer.Option(help="Default duration in low-level steps (the paper: 8, 10, 15).")] = 15,
+    k: Annotated[
+        int | None,
+        typer.Option(help="Default duration in low-level steps (default: 15 on the arm, 10 else).", callback=check.count(1)),
+    ] = None,
+    param: Annotated[
+        str | None,
+        typer.Option(
+            help="Observation part the Manager's parameters replace, for a run on a Dict observation "
+            "(default: desired_goal; 'none' for none). Not for the arm's tasks, whose skills declare theirs."
+        ),
+    ] = None,
+    low: Annotated[
+        str | None,
+        typer.Option(
+            help="Lower bounds of the parameters, comma-separated (or one number for "
+            "all; default: the part's own, when finite)."
+        ),
+    ] = None,
+    high: Annotated[str | None, typer.Option(help="Upper bounds of the parameters, as --low.")] = None,
+    done_part: Annotated[
+        str | None,
+        typer.Option(
+            help="End the skill early when this part (e.g. achieved_goal) is within --done-within of its parameters."
+        ),
+    ] = None,
+    done_within: Annotated[float | None, typer.Option(help="Distance for --done-part.", callback=check.real(0.0))] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace a skill of the same name.")] = False,
     library: _LIBRARY = None,
 ) -> None:
-    """Turn a finished training run into a named, frozen skill in the library."""
-    from hrlp.checkpoint import CheckpointError
-    from hrlp.skills import SkillLibrary
+    """Turn a finished training run into a named, frozen skill in the library (docs/skills.md)."""
+    from hrlp.checkpoint import CheckpointError, read_run_checkpoint
+    from hrlp.skills import PARAM_SPECS, SkillLibrary
 
     try:
-        path = SkillLibrary(library).add(run_dir, name, k=k, overwrite=overwrite)
+        task = read_run_checkpoint(run_dir / "checkpoint")[2].task
+        lib = SkillLibrary(library)
+        if task.removeprefix("hrlp/").removesuffix("-v0") in PARAM_SPECS:
+            if given := [f"--{o.replace('_', '-')}" for o, v in (("param", param), ("low", low), ("high", high),
+                                                                 ("done_part", done_part), ("done_within", done_within))
+                         if v is not None]:  # fmt: skip
+                raise ValueError(f"{', '.join(given)}: an arm skill's parameters are its task's ({task}); leave them out")
+            path = lib.add(run_dir, name, k=15 if k is None else k, overwrite=overwrite)
+        else:
+            from hrlp.training.loading import policy_skill_files
+
+            part = "desired_goal" if param is None else (None if param == "none" else param)
+            tensors, manifest = policy_skill_files(run_dir, param=part, low=_numbers(low, "--low"),
+                                                   high=_numbers(high, "--high"), k=10 if k is None else k,
+                                                   done_part=done_part, done_within=done_within)  # fmt: skip
+            path = lib.save(name, tensors, manifest, overwrite=overwrite)
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
     console.print(f"skill {name!r} written to {path}")
+
+
+def _numbers(text: str | None, option: str) -> list[float] | None:
+    """``"0,-1.5"`` -> ``[0.0, -1.5]``; a one-line ValueError naming ``option`` for anything else."""
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{option} must be numbers separated by commas, got {text!r}") from None
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{option} must be finite numbers, got {text!r}")
+    return values
 
 
 @skills_app.command("build")

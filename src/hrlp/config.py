@@ -397,9 +397,7 @@ class TrainConfig:
             bounds.fraction_problem("value fraction", self.value.fraction, self.steps_per_env, "time steps"),
         ]
         if self.macro is not None:
-            from hrlp.envs.check import default_episode_steps
-
-            episode = self.episode_steps or default_episode_steps()
+            episode = self.episode_steps or bounds.DEFAULT_EPISODE_STEPS
             micro = None if self.macro.micro is None else self.macro.micro.duration
             problems += [
                 bounds.duration_problem("k", self.macro.k, episode),
@@ -407,20 +405,6 @@ class TrainConfig:
             ]
         if problem := next((p for p in problems if p is not None), None):
             raise ValueError(problem)
-
-    def resolved(self) -> TrainConfig:
-        """This config with a concrete number of sampling workers and a concrete backend: ``workers`` 0 becomes
-        :func:`auto_workers`'s count for ``num_envs``, ``backend`` ``auto`` becomes :func:`auto_backend`'s choice; what a
-        run records and resumes with. Raises ValueError for ``batched`` where it does not apply."""
-        cfg = self
-        if cfg.workers == 0:
-            cfg = dataclasses.replace(cfg, workers=auto_workers(cfg.num_envs))
-        batchable = batchable_task(cfg.task)
-        if cfg.backend == "auto":
-            cfg = dataclasses.replace(cfg, backend="batched" if batchable else "serial")
-        elif cfg.backend == "batched" and not batchable:
-            raise ValueError(f"backend batched steps hrlp's arm tasks; {cfg.task} is not one: use serial or auto")
-        return cfg
 
     @property
     def steps_per_env(self) -> int:
@@ -460,16 +444,6 @@ class TrainConfig:
 
 BACKENDS = ("auto", "batched", "serial")
 """The values of :attr:`TrainConfig.backend`."""
-
-
-def batchable_task(task: str) -> bool:
-    """Whether ``task`` (a name or id) is an hrlp arm task, whose worlds the batched backend steps together, flat or
-    under a Manager (:data:`hrlp.envs.batched.VECTORISED`)."""
-    from hrlp.envs.batched import VECTORISED
-    from hrlp.envs.registry import TASKS
-
-    name = task.removeprefix("hrlp/").removesuffix("-v0")
-    return name in TASKS and TASKS[name].task_type in VECTORISED
 
 
 WORKERS_VARIABLE = "HRLP_WORKERS"

@@ -10,13 +10,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 from scipy import stats as sstats
 
 from hrlp.envs.vector import NO_SUCCESS_TEST, VectorStep
 from hrlp.rollout import Episode
-from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroVectorEnv
+from hrlp.skills.core import ObsLayout
+from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv
+from hrlp.training.loading import load_trained
 
 
 @dataclass(frozen=True)
@@ -161,12 +164,11 @@ def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, determin
     Managers alike. ``on_progress``, if given, is called after every episode with the running :class:`EvalProgress`
     (the last call has ``done == episodes``); :class:`ProgressLines` turns those calls into log lines.
     """
-    from hrlp.train import load_trained
-
     if episodes <= 0:
         raise ValueError(f"episodes must be a positive integer, got {episodes}")
     trained = load_trained(run_dir)
     n = min(episodes, EVAL_ENVS)
+    gap = _capsule_target_spans(trained.make_env(**(task_kwargs or {})))
     env = trained.vector_env(n, **(task_kwargs or {}))
     names = env.names if isinstance(env, MacroVectorEnv | BatchedMacroVectorEnv) else None
     gen = torch.Generator().manual_seed(seed)
@@ -177,7 +179,7 @@ def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, determin
         for first in range(0, episodes, n):
             m = min(n, episodes - first)  # the environments whose first episode counts
             obs = env.reset(seed=seed + first)
-            start_gap = np.linalg.norm(obs[:, 21:24] - obs[:, 24:27], axis=1) if obs.shape[1] >= 27 else None
+            start_gap = None if gap is None else np.linalg.norm(obs[:, gap[0]] - obs[:, gap[1]], axis=1)
             ret, length = np.zeros(n), np.zeros(n, dtype=np.int64)
             running = np.arange(n) < m
             while running.any():
@@ -207,6 +209,20 @@ def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, determin
         macro_usage={n: usage[n] / total for n in names} if names and total else None,
         move=_move_stats(moves, tds) if moves and len(moves) == len(tds) else None,
     )
+
+
+def _capsule_target_spans(env: gym.Env) -> tuple[slice, slice] | None:
+    """Where the capsule C and the target T lie in the observation of a task that names both parts (the arm's moving
+    tasks, :attr:`hrlp.envs.arm_env.ArmEnv.observation_parts`), for the reach-and-move figures; None for any other
+    environment. Closes ``env``."""
+    try:
+        layout = env.layout if isinstance(env, MacroEnv) else ObsLayout.of_space(
+            env.observation_space, getattr(env.unwrapped, "observation_parts", None))  # fmt: skip
+    finally:
+        env.close()
+    if "capsule" in layout.names and "target" in layout.names:
+        return layout.span("capsule"), layout.span("target")
+    return None
 
 
 def _episode(step: VectorStep, i: int, ret: float, length: int, moves: list, start_gap: float | None) -> Episode:

@@ -24,6 +24,7 @@ from hrlp.training.environments import (
     batched_factory,
     check_skill_hashes,
     env_factory,
+    resolve_config,
     run_factory,
 )
 from hrlp.training.loading import (
@@ -78,6 +79,7 @@ __all__ = [
     "progress_line",
     "read_run_checkpoint",
     "rejected_steps_message",
+    "resolve_config",
     "run_factory",
     "train",
     "train_with_progress",

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from hrlp.envs.check import probe_task, registered_gym_id
+from hrlp.envs.check import registered_gym_id
+from hrlp.envs.registry import probe_task
 from hrlp.evaluate import evaluate_run
 from hrlp.runs import read_run
 from hrlp.train import TrainConfig, read_run_checkpoint, train
@@ -157,7 +158,8 @@ def test_short_episodes_get_short_episode_settings(tmp_path):
     from typer.testing import CliRunner
 
     from hrlp.cli import app
-    from hrlp.envs.check import SHORT_EPISODE_SETTINGS, declared_episode_steps
+    from hrlp.envs.check import SHORT_EPISODE_SETTINGS
+    from hrlp.envs.registry import declared_episode_steps
 
     assert declared_episode_steps("hrlp/ParamBandit-v0") == 1 and declared_episode_steps("Pendulum-v1") == 200
     assert declared_episode_steps("Reacher") == 300 and declared_episode_steps("Pendulum-v1", 20) == 20

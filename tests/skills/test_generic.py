@@ -11,14 +11,17 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 import goal_envs
+from hrlp.cli import app
 from hrlp.config import MacroSpec, MicroAction, TrainConfig
 from hrlp.evaluate import evaluate_run
 from hrlp.skills import DirectControl, ObsLayout, ObsView, ParamBox, ScriptedSkill
 from hrlp.skills.core import Hierarchy, decide, initiated
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.train import env_factory, train_with_progress
+from hrlp.training import from_run
 from hrlp.training.sources import resolve_skill
 
 TASK = "goal_envs:PointGoal-v0"
@@ -144,35 +147,93 @@ def test_skills_that_do_not_fit_the_environment_are_refused_in_one_line_before_a
         arm()
 
 
-def _sources_module(tmp_path: Path) -> str:
-    """A user's module that makes a skill of each source: a flat run hrlp trained on PointGoal and a Stable-Baselines3
-    PPO file (both briefly trained: the Manager must learn which skill and parameters to use)."""
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> Path:
+    """A directory with a flat run hrlp trained on PointGoal (``flat``) and a Stable-Baselines3 PPO file
+    (``ppo_point.zip``), both briefly trained: the Manager must learn which skill and parameters to use."""
     sb3 = pytest.importorskip("stable_baselines3")
+    root = tmp_path_factory.mktemp("sources")
     model = sb3.PPO("MultiInputPolicy", gym.make(TASK), n_steps=64, batch_size=64, n_epochs=1, seed=0,
                     policy_kwargs={"net_arch": [16]}, device="cpu")  # fmt: skip
     model.learn(128)
-    model.save(tmp_path / "ppo_point.zip")
+    model.save(root / "ppo_point.zip")
     cfg = TrainConfig(task=TASK, steps=2_000, batch_steps=500, num_envs=4, seed=0, hidden=(16,))
-    train_with_progress(cfg, tmp_path / "flat")
+    train_with_progress(cfg, root / "flat")
+    return root
+
+
+def test_a_run_on_a_dict_environment_becomes_a_library_skill_that_acts_as_the_run(trained, tmp_path):
+    lib = tmp_path / "lib"
+    r = CliRunner().invoke(app, ["skills", "add", str(trained / "flat"), "--name", "point", "--library", str(lib),
+                                 "--low", "-1", "--high", "1", "--k", "7", "--done-part", "achieved_goal",
+                                 "--done-within", "0.05"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    skill = resolve_skill("point", lib)
+    direct = from_run(trained / "flat", "point", low=-1, high=1, k=7)
+    assert skill.parts == direct.parts and skill.param_part == "desired_goal" and skill.k == 7
+    assert skill.params == ParamBox.of([-1, -1], [1, 1]) and isinstance(skill.content_hash, str)
+    env = gym.make(TASK)
+    layout = ObsLayout.of_space(env.observation_space)
+    rows = np.stack([gym.spaces.flatten(env.observation_space, env.observation_space.sample()) for _ in range(5)])
+    view, params = ObsView(rows, layout, np.arange(5)), np.random.default_rng(0).uniform(-1, 1, (5, 2))
+    np.testing.assert_allclose(skill.act(view, params), direct.act(view, params), atol=1e-5)  # float64 and float32 nets
+    near = view["achieved_goal"] + 0.01
+    assert skill.done(view, near).all() and direct.done(view, near) is None
+    listed = CliRunner().invoke(app, ["skills", "list", "--library", str(lib)], env={"COLUMNS": "250"})
+    assert listed.exit_code == 0 and "│ point " in listed.output and TASK in listed.output, listed.output
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("parts", [["achieved_goal", 2], ["desired_goal", 2]], "observation size, the widths of its parts"),
+        ("param_part", "hand", "'param_part' 'hand' is not one of its parts"),
+        ("action_low", [0.0], "'action_low' must be 2 finite numbers"),
+        ("done", {"part": "achieved_goal", "within": -1}, "manifest's 'done' must be"),
+        ("param", {"low": [0, 0, 0], "high": [1, 1, 1]}, "parameter box has 3 numbers, its parameter part 2"),
+    ],
+)
+def test_a_tampered_policy_skill_manifest_is_refused_in_one_line(trained, tmp_path, field, value, message):
+    import json
+
+    lib = tmp_path / "lib"
+    r = CliRunner().invoke(app, ["skills", "add", str(trained / "flat"), "--name", "point", "--library", str(lib),
+                                 "--low", "-1", "--high", "1"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    meta = lib / "point" / "meta.json"
+    document = json.loads(meta.read_text())
+    document["meta"][field] = value  # the manifest (the file also holds the weights' sha256 and tensor names)
+    meta.write_text(json.dumps(document))
+    with pytest.raises(ValueError, match=message) as e:
+        resolve_skill("point", lib)
+    assert "\n" not in str(e.value) and "skill 'point'" in str(e.value)
+
+
+def test_skills_add_refuses_bad_parameter_settings_in_one_line(trained, tmp_path):
+    for extra, message in ((["--param", "hand"], "no observation part 'hand'"),
+                           (["--low", "-1,0,1", "--high", "1"], "low must be one number or 2"),
+                           (["--low", "x"], "--low must be numbers separated by commas"),
+                           (["--param", "observation"], "has no finite bounds on record")):  # fmt: skip
+        r = CliRunner().invoke(app, ["skills", "add", str(trained / "flat"), "--name", "p", "--library",
+                                     str(tmp_path / "lib"), *extra])  # fmt: skip
+        assert r.exit_code != 0 and message in r.output, (extra, r.output)
+
+
+def test_a_manager_composes_all_three_skill_sources_on_a_dict_environment_and_learns(trained, tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(tmp_path))
     (tmp_path / "my_skills.py").write_text(
         textwrap.dedent(f"""
         from hrlp.skills import from_sb3
         from hrlp.training import from_run
 
         def sb3_reach():
-            return from_sb3({str(tmp_path / "ppo_point.zip")!r}, "sb3_reach", low=-1, high=1, k=10)
+            return from_sb3({str(trained / "ppo_point.zip")!r}, "sb3_reach", low=-1, high=1, k=10)
 
         def hrlp_reach():
-            return from_run({str(tmp_path / "flat")!r}, "hrlp_reach", k=10, done_part="achieved_goal", done_within=0.05)
+            return from_run({str(trained / "flat")!r}, "hrlp_reach", k=10, done_part="achieved_goal", done_within=0.05)
     """)
     )
-    return "my_skills"
-
-
-def test_a_manager_composes_all_three_skill_sources_on_a_dict_environment_and_learns(tmp_path, monkeypatch):
-    monkeypatch.syspath_prepend(str(tmp_path))
-    module = _sources_module(tmp_path)
-    refs = ("goal_envs:wander", f"{module}:sb3_reach", f"{module}:hrlp_reach", "goal_envs:near_goal")
+    refs = ("goal_envs:wander", "my_skills:sb3_reach", "my_skills:hrlp_reach", "goal_envs:near_goal")
     macro = env_factory(TASK, macro=MacroSpec(refs))()
     assert macro.names == ["wander", "sb3_reach", "hrlp_reach", "near_goal"] and macro.param_dims == (2, 2, 2, 2)
     cfg = TrainConfig(task=TASK, steps=30_000, batch_steps=500, num_envs=8, seed=0, macro=MacroSpec(refs))

@@ -80,7 +80,7 @@ def test_imitation_writes_a_run_that_eval_reads_and_trpo_fine_tunes(tmp_path):
     from hrlp.evaluate import evaluate_run
     from hrlp.experiments.presets import GRIPPER_START
     from hrlp.skills.imitate import ImitationConfig, imitate
-    from hrlp.train import load_trained, train
+    from hrlp.train import load_trained, resolve_config, train
 
     cfg = TrainConfig(task="Gripper", steps=200, batch_steps=100, num_envs=2, episode_steps=20, init_log_std=-1.0,
                       task_kwargs={**GRIPPER_START, "c3": -8, "c4": 10})  # fmt: skip
@@ -90,7 +90,7 @@ def test_imitation_writes_a_run_that_eval_reads_and_trpo_fine_tunes(tmp_path):
     assert first["acting"] == "expert" and first["states"] == 40 and last["states"] == 60  # 20 steps per episode
     assert first["fit_mse"] < 0.1  # the student's mean follows the expert's torques on the states it saw
     trained = load_trained(tmp_path / "run")
-    assert trained.meta["iteration"] == 0 and trained.config == cfg.resolved()  # the workers it used
+    assert trained.meta["iteration"] == 0 and trained.config == resolve_config(cfg)  # the workers it used
     assert evaluate_run(tmp_path / "run", episodes=1).episodes == 1
     rows = list(train(dataclasses.replace(cfg, steps=100), tmp_path / "run", resume=True))  # TRPO from the student
     assert len(rows) == 1 and rows[0]["iteration"] == 1

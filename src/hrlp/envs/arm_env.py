@@ -30,6 +30,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from hrlp import bounds
 from hrlp.envs.physics import BASE_OBS_DIM, BASE_PARTS, N_JOINTS, OBS_FEATURES, TARGET_PART, ArmPhysics, PhysicsConfig
 from hrlp.envs.tasks import Task
 
@@ -59,7 +60,7 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
         self,
         task: Task,
         *,
-        episode_steps: int = 300,
+        episode_steps: int = bounds.DEFAULT_EPISODE_STEPS,
         physics: PhysicsConfig | None = None,
         render_mode: str | None = None,
         width: int = 480,

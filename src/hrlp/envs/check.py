@@ -10,15 +10,15 @@ from typing import Any
 
 import gymnasium as gym
 
+from hrlp import bounds
+
 #: Keyword arguments of ``gymnasium.make`` itself (besides the environment's own).
 _GYM_MAKE_ARGUMENTS = ("max_episode_steps", "autoreset", "apply_api_compatibility", "disable_env_checker", "render_mode")
 
 
 def default_episode_steps() -> int:
-    """The episode length of hrlp tasks when none is given (:class:`~hrlp.envs.arm_env.ArmEnv`'s default)."""
-    from hrlp.envs.arm_env import ArmEnv
-
-    return int(inspect.signature(ArmEnv).parameters["episode_steps"].default)
+    """The episode length of hrlp tasks when none is given (:data:`hrlp.bounds.DEFAULT_EPISODE_STEPS`)."""
+    return bounds.DEFAULT_EPISODE_STEPS
 
 
 def parameterised_dims(space: gym.Space) -> tuple[int, ...]:
@@ -119,19 +119,7 @@ last four are the paper's (:data:`hrlp.config.PAPER_SETTINGS`), with which these
 defaults are shown to learn as well on Reacher-v5, not on short episodes."""
 
 
-def declared_episode_steps(task: str, episode_steps: int | None = None) -> int | None:
-    """The most decisions an episode of ``task`` may last, as declared: ``episode_steps`` if given, else a Gymnasium
-    id's registered time limit (``max_episode_steps``), else the hrlp tasks' default; None when nothing declares one."""
-    from hrlp.envs import TASKS
-
-    if episode_steps is not None:
-        return episode_steps
-    if task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
-        return default_episode_steps()
-    return gym.spec(registered_gym_id(task)).max_episode_steps
-
-
-def _dependency_line(env_id: str, error: Exception) -> str:
+def dependency_line(env_id: str, error: Exception) -> str:
     """One line for a Gymnasium environment whose optional dependency is missing, naming the pip extra."""
     text = " ".join(str(error).split())
     if match := re.search(r"gymnasium\[([\w-]+)\]", text):
@@ -151,45 +139,3 @@ def gym_kwargs(task: str, episode_steps: int | None, kwargs: dict[str, Any]) -> 
         raise ValueError(f"{task}: give the episode length once, as episode_steps (--episode-steps) or as the task "
                          "argument max_episode_steps, not both")  # fmt: skip
     return {**kwargs, "max_episode_steps": episode_steps}
-
-
-def probe_task(task: str, episode_steps: int | None = None, /, **kwargs: Any) -> tuple[gym.Space, gym.Space]:
-    """Build ``task`` (an hrlp task name or id, or a Gymnasium id) once with ``kwargs`` and return its observation
-    and action spaces; raise ValueError, one line naming the task, for an unknown task, an unknown or invalid argument
-    (listing the valid ones), a missing optional dependency (naming the pip extra) or a space hrlp cannot train on. For
-    a Gymnasium id, ``episode_steps`` is its time limit (:func:`gym_kwargs`)."""
-    from hrlp.envs import TASKS, make
-
-    name = task.removeprefix("hrlp/").removesuffix("-v0")
-    if name in TASKS:
-        if "episode_steps" in kwargs:
-            raise ValueError(f"{name}: give the episode length as episode_steps (--episode-steps), not as a task argument")
-        kw = dict(kwargs)
-        if episode_steps is not None:
-            kw["episode_steps"] = episode_steps
-        try:
-            env = make(name, **kw)
-        except (TypeError, AttributeError) as e:  # e.g. physics=3: a value of the wrong kind
-            raise ValueError(f"{name}: invalid task arguments {kwargs}: {e}") from None
-        spaces = env.observation_space, env.action_space
-        env.close()
-        return spaces
-    env_id = registered_gym_id(task)
-    kwargs = gym_kwargs(task, episode_steps, kwargs)
-    try:
-        env = gym.make(task, **kwargs)
-    except gym.error.DependencyNotInstalled as e:
-        raise ValueError(_dependency_line(task, e)) from None
-    except ImportError as e:
-        raise ValueError(f"{task} needs the Python package {e.name or e}, which is not installed") from None
-    except TypeError as e:
-        valid = gym_arguments(env_id)
-        if unknown := [k for k in kwargs if k not in valid]:
-            raise ValueError(invalid_arguments_line(task, unknown, valid)) from None
-        raise ValueError(f"{task}: invalid task arguments {kwargs}: {' '.join(str(e).split())}") from None
-    except Exception as e:  # a third-party constructor given the user's arguments: say so in one line
-        raise ValueError(f"{task}: cannot be built with the task arguments {kwargs}: {' '.join(str(e).split())}") from None
-    spaces = env.observation_space, env.action_space
-    env.close()
-    check_spaces(task, *spaces)
-    return spaces

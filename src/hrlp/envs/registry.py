@@ -16,7 +16,15 @@ from typing import Any
 import gymnasium as gym
 
 from hrlp.envs.arm_env import ArmEnv
-from hrlp.envs.check import invalid_arguments_line
+from hrlp.envs.check import (
+    check_spaces,
+    default_episode_steps,
+    dependency_line,
+    gym_arguments,
+    gym_kwargs,
+    invalid_arguments_line,
+    registered_gym_id,
+)
 from hrlp.envs.tasks import (
     GripperTask,
     GripReward,
@@ -165,3 +173,53 @@ def register_all() -> None:
             gym.register(
                 id=spec.env_id, entry_point="hrlp.envs.registry:make", kwargs={"name": spec.name}, disable_env_checker=True
             )
+
+
+def declared_episode_steps(task: str, episode_steps: int | None = None) -> int | None:
+    """The most decisions an episode of ``task`` may last, as declared: ``episode_steps`` if given, else a Gymnasium
+    id's registered time limit (``max_episode_steps``), else the hrlp tasks' default; None when nothing declares one."""
+    if episode_steps is not None:
+        return episode_steps
+    if task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
+        return default_episode_steps()
+    return gym.spec(registered_gym_id(task)).max_episode_steps
+
+
+def probe_task(task: str, episode_steps: int | None = None, /, **kwargs: Any) -> tuple[gym.Space, gym.Space]:
+    """Build ``task`` (an hrlp task name or id, or a Gymnasium id) once with ``kwargs`` and return its observation
+    and action spaces; raise ValueError, one line naming the task, for an unknown task, an unknown or invalid argument
+    (listing the valid ones), a missing optional dependency (naming the pip extra) or a space hrlp cannot train on. For
+    a Gymnasium id, ``episode_steps`` is its time limit (:func:`gym_kwargs`)."""
+    name = task.removeprefix("hrlp/").removesuffix("-v0")
+    if name in TASKS:
+        if "episode_steps" in kwargs:
+            raise ValueError(f"{name}: give the episode length as episode_steps (--episode-steps), not as a task argument")
+        kw = dict(kwargs)
+        if episode_steps is not None:
+            kw["episode_steps"] = episode_steps
+        try:
+            env = make(name, **kw)
+        except (TypeError, AttributeError) as e:  # e.g. physics=3: a value of the wrong kind
+            raise ValueError(f"{name}: invalid task arguments {kwargs}: {e}") from None
+        spaces = env.observation_space, env.action_space
+        env.close()
+        return spaces
+    env_id = registered_gym_id(task)
+    kwargs = gym_kwargs(task, episode_steps, kwargs)
+    try:
+        env = gym.make(task, **kwargs)
+    except gym.error.DependencyNotInstalled as e:
+        raise ValueError(dependency_line(task, e)) from None
+    except ImportError as e:
+        raise ValueError(f"{task} needs the Python package {e.name or e}, which is not installed") from None
+    except TypeError as e:
+        valid = gym_arguments(env_id)
+        if unknown := [k for k in kwargs if k not in valid]:
+            raise ValueError(invalid_arguments_line(task, unknown, valid)) from None
+        raise ValueError(f"{task}: invalid task arguments {kwargs}: {' '.join(str(e).split())}") from None
+    except Exception as e:  # a third-party constructor given the user's arguments: say so in one line
+        raise ValueError(f"{task}: cannot be built with the task arguments {kwargs}: {' '.join(str(e).split())}") from None
+    spaces = env.observation_space, env.action_space
+    env.close()
+    check_spaces(task, *spaces)
+    return spaces

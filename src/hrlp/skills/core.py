@@ -40,13 +40,14 @@ class ObsLayout:
     dim: int
 
     def __post_init__(self) -> None:
-        seen: set[str] = set()
+        spans: dict[str, slice] = {}
         for name, lo, hi in self.parts:
-            if name in seen:
+            if name in spans:
                 raise ValueError(f"observation layout names part {name!r} twice")
             if not 0 <= lo <= hi <= self.dim:
                 raise ValueError(f"observation part {name!r} spans [{lo}, {hi}), outside a row of {self.dim} numbers")
-            seen.add(name)
+            spans[name] = slice(lo, hi)
+        object.__setattr__(self, "_spans", spans)  # looked up at every skill step
 
     @classmethod
     def of_space(cls, space: gym.Space, named: Mapping[str, slice] | None = None) -> ObsLayout:
@@ -76,10 +77,7 @@ class ObsLayout:
 
     def span(self, name: str) -> slice:
         """The slice of a row holding part ``name``; KeyError if there is none."""
-        for n, lo, hi in self.parts:
-            if n == name:
-                return slice(lo, hi)
-        raise KeyError(name)
+        return self._spans[name]  # type: ignore[attr-defined]
 
     def width(self, name: str) -> int:
         """How many numbers part ``name`` takes."""
@@ -178,7 +176,7 @@ class ParamBox:
 
     def to_json(self) -> dict[str, Any]:
         """JSON-serialisable form."""
-        return {"low": list(self.low), "high": list(self.high), "meaning": self.meaning, "frame": self.frame}
+        return {"dim": self.dim, "low": list(self.low), "high": list(self.high), "meaning": self.meaning, "frame": self.frame}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ParamBox:
@@ -345,6 +343,11 @@ class Hierarchy:
         """``1 + S``: the choice, then every parameter block."""
         return 1 + int(sum(self.param_dims))
 
+    @property
+    def ending(self) -> tuple[bool, ...]:
+        """Whether each skill has a done test of its own (the others run their ``k`` steps, untested)."""
+        return tuple(type(s).done is not Skill.done for s in self.skills)
+
 
 def initiated(skills: Sequence[Skill], obs: ObsView, choice: np.ndarray, ran: np.ndarray | None = None) -> np.ndarray:
     """The skill each of ``N`` worlds runs under initiation sets.
@@ -403,7 +406,7 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
     everyone = np.arange(n)
     if h.chain:
         choice = initiated(h.skills, ObsView(obs, h.layout, everyone, extra), choice, ran)
-    offsets = h.offsets
+    offsets, ending = h.offsets, h.ending
     params = np.empty((n, int(offsets[-1])))
     for s in np.unique(choice):  # each chosen skill's parameters in its own units, then its entry hook
         skill, idx = h.skills[s], np.flatnonzero(choice == s)
@@ -442,6 +445,8 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
         terminated[running], truncated[running] = term, trunc & ~term
         active[running[ended]] = False
         for s, idx in groups:  # a skill that says it is done stops its worlds (a success end, not a time-out)
+            if not ending[s]:
+                continue
             going = idx[active[idx]]
             if going.size and (d := h.skills[s].done(ObsView(obs[going], h.layout, going, extra),
                                                        params[going, offsets[s] : offsets[s + 1]])) is not None:  # fmt: skip

@@ -192,7 +192,7 @@ def imitate(
         raise ValueError(f"{run_dir} already holds a run; choose another directory")
     trainer = Trainer(train_config)  # the run's policy, normaliser and sampler, as TRPO would start them
     try:
-        return _imitate(trainer, trainer.cfg, run_dir, cfg, log)  # with the workers it uses (TrainConfig.resolved)
+        return _imitate(trainer, trainer.cfg, run_dir, cfg, log)  # with the workers it uses (resolve_config)
     finally:
         trainer.sampler.close()
 

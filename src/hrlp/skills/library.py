@@ -21,6 +21,7 @@ The library lives in ``$HRLP_SKILLS`` or ``~/.hrlp/skills``.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import stat
@@ -28,6 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from hrlp.checkpoint import (
@@ -43,8 +45,10 @@ from hrlp.checkpoint import (
 )
 from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
 from hrlp.envs.registry import TASKS
-from hrlp.policies.mlp import GaussianPolicy
+from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
+from hrlp.skills.core import ParamBox
+from hrlp.skills.policy import PolicySkill
 from hrlp.skills.skill import PARAM_SPECS, Initiation, ParamSpec, Skill, check_features, features_dim, initiation_for
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
@@ -152,21 +156,66 @@ def _integer(m: dict[str, Any], key: str, low: int, high: int, what: str) -> int
     return value
 
 
-def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...], tuple[str, ...]]:
-    """``(param, k, hidden, features)`` of a skill's manifest, whose every number is checked; raises
-    :class:`_SkillProblem`. A manifest without ``features`` (every skill written before them) reads none."""
+def _check_any(m: dict[str, Any]) -> None:
+    """A manifest of either format (:func:`_check_manifest` for the arm's, :func:`_check_policy_manifest` for a policy
+    on any environment's), checked; raises :class:`_SkillProblem`."""
+    if m.get("format") == POLICY_FORMAT:
+        _check_policy_manifest(m)
+    else:
+        _check_manifest(m)
+
+
+#: The ``format`` of a skill file holding a policy trained on any Gymnasium environment (a :class:`PolicySkill`); an
+#: arm skill's manifest has no ``format``.
+POLICY_FORMAT = "policy"
+
+
+def _check_policy_manifest(m: dict[str, Any]) -> tuple[ParamBox, int, tuple[int, ...]]:
+    """``(params, k, hidden)`` of a policy skill's manifest, whose every number is checked: its observation parts
+    (names and widths, summing to ``obs_dim``), the part its parameters replace and their box, its action bounds
+    (``act_dim`` finite pairs), its early end, its network and normaliser; raises :class:`_SkillProblem`."""
     if m.get("kind") != "skill":
         raise _SkillProblem(f"not a skill (kind {_short(m.get('kind'))})")
-    param = _param_spec(m)
     k = _integer(m, "k", 1, MAX_K, "default duration")
+    parts = m.get("parts")
+    if not isinstance(parts, list) or not parts or not all(
+        isinstance(p, list) and len(p) == 2 and isinstance(p[0], str) and isinstance(p[1], int) and not isinstance(p[1], bool)
+        and 0 < p[1] <= 1 << 20 for p in parts
+    ):  # fmt: skip
+        raise _SkillProblem(f"manifest's 'parts' must be a list of [name, width] pairs, got {_short(parts)}")
+    names = [p[0] for p in parts]
+    if len(set(names)) != len(names):
+        raise _SkillProblem(f"manifest's 'parts' name a part twice ({', '.join(names)})")
+    obs_dim = sum(p[1] for p in parts)
+    _integer(m, "obs_dim", obs_dim, obs_dim, "observation size, the widths of its parts")
+    act_dim = _integer(m, "act_dim", 1, 1 << 16, "action size")
+    param_part = m.get("param_part")
+    if param_part is not None and param_part not in names:
+        raise _SkillProblem(f"manifest's 'param_part' {_short(param_part)} is not one of its parts ({', '.join(names)})")
     try:
-        features = check_features(m.get("features", []), "manifest's 'features'")
+        box = ParamBox.from_json(m.get("param") or {})
     except ValueError as e:
-        raise _SkillProblem(_short(e, 200)) from None
-    obs_dim = BASE_OBS_DIM + param.dim + features_dim(features)
-    with_features = f" reading {', '.join(features)}" if features else ""
-    _integer(m, "obs_dim", obs_dim, obs_dim, f"observation size of a {m['task']} skill{with_features}")
-    _integer(m, "act_dim", N_JOINTS, N_JOINTS, "torques of the arm's joints")
+        raise _SkillProblem(f"manifest's 'param': {_short(e, 120)}") from None
+    width = dict(map(tuple, parts)).get(param_part, 0) if param_part else 0
+    if box.dim != width:
+        raise _SkillProblem(f"manifest's parameter box has {box.dim} numbers, its parameter part {width}")
+    for key in ("action_low", "action_high"):
+        v = m.get(key)
+        if not isinstance(v, list) or len(v) != act_dim or not all(_number(x) and math.isfinite(x) for x in v):
+            raise _SkillProblem(f"manifest's {key!r} must be {act_dim} finite numbers, got {_short(v)}")
+    if any(lo > hi for lo, hi in zip(m["action_low"], m["action_high"], strict=True)):
+        raise _SkillProblem("manifest's action_low exceeds its action_high")
+    done = m.get("done")
+    if done is not None and (not isinstance(done, dict) or done.get("part") not in names
+                             or not (_number(done.get("within")) and 0 < done["within"] < math.inf)):  # fmt: skip
+        raise _SkillProblem(f"manifest's 'done' must be {{part: one of its parts, within: a positive distance}}, got "
+                            f"{_short(done)}")  # fmt: skip
+    hidden = _check_network(m, obs_dim)
+    return box, k, hidden
+
+
+def _check_network(m: dict[str, Any], obs_dim: int) -> tuple[int, ...]:
+    """The manifest's hidden widths, normaliser settings and training record, checked; returns ``hidden``."""
     hidden = m.get("hidden")
     if not isinstance(hidden, list) or not all(isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in hidden):
         raise _SkillProblem(f"manifest's 'hidden' must be a list of positive layer widths, got {_short(hidden)}")
@@ -181,8 +230,27 @@ def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...],
     if not isinstance(trained, dict) or not isinstance(trained.get("config"), dict):
         raise _SkillProblem(f"manifest's 'trained' must be an object holding the training 'config', got {_short(trained)}")
     _integer(trained, "env_steps", 0, 2**62, "environment steps it was trained for")
+    return tuple(hidden)
+
+
+def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...], tuple[str, ...]]:
+    """``(param, k, hidden, features)`` of an arm skill's manifest, whose every number is checked; raises
+    :class:`_SkillProblem`. A manifest without ``features`` (every skill written before them) reads none."""
+    if m.get("kind") != "skill":
+        raise _SkillProblem(f"not a skill (kind {_short(m.get('kind'))})")
+    param = _param_spec(m)
+    k = _integer(m, "k", 1, MAX_K, "default duration")
+    try:
+        features = check_features(m.get("features", []), "manifest's 'features'")
+    except ValueError as e:
+        raise _SkillProblem(_short(e, 200)) from None
+    obs_dim = BASE_OBS_DIM + param.dim + features_dim(features)
+    with_features = f" reading {', '.join(features)}" if features else ""
+    _integer(m, "obs_dim", obs_dim, obs_dim, f"observation size of a {m['task']} skill{with_features}")
+    _integer(m, "act_dim", N_JOINTS, N_JOINTS, "torques of the arm's joints")
+    hidden = _check_network(m, obs_dim)
     _initiation(m)
-    return param, k, tuple(hidden), features
+    return param, k, hidden, features
 
 
 def _initiation(m: dict[str, Any]) -> Initiation:
@@ -214,7 +282,7 @@ def _expected_tensors(m: dict[str, Any]) -> dict[str, tuple[int, ...]]:
 
 def _check_header(m: dict[str, Any], header: dict[str, TensorInfo]) -> None:
     """The manifest against the tensors' names, dtypes and shapes in the safetensors header, before any is built."""
-    _check_manifest(m)
+    _check_any(m)
     expected = _expected_tensors(m)
     network = f"obs_dim {m['obs_dim']}, hidden {m['hidden']}, act_dim {m['act_dim']}"
     missing, unexpected = sorted(set(expected) - set(header)), sorted(set(header) - set(expected))
@@ -343,10 +411,12 @@ class SkillLibrary:
         _, m, sha256 = self._read(name)
         return {**m, "sha256": sha256}
 
-    def load(self, name: str) -> Skill:
+    def load(self, name: str) -> Skill | PolicySkill:
         """The named skill, frozen. Raises a one-line error naming the skill for a missing, tampered, truncated or
         degenerate one (module docstring); the network is built only from a manifest its tensors agree with."""
         tensors, m, sha256 = self._read(name)
+        if m.get("format") == POLICY_FORMAT:
+            return self._load_policy(name, tensors, m, sha256)
         param, k, hidden, features = _check_manifest(m)
         policy = GaussianPolicy(m["obs_dim"], m["act_dim"], hidden)
         stats = {key.removeprefix("normalizer."): v for key, v in tensors.items() if key.startswith("normalizer.")}
@@ -357,10 +427,45 @@ class SkillLibrary:
             raise CheckpointError(f"skill {name!r} ({self.root / name}): {_short(e, 200)}") from None
         return Skill(name, m["task"], param, k, policy, norm, sha256, features, _initiation(m))
 
+    def _load_policy(self, name: str, tensors: dict[str, torch.Tensor], m: dict[str, Any], sha256: str) -> PolicySkill:
+        """A policy skill (:data:`POLICY_FORMAT`) from its checked files: its mean action in NumPy on the frozen
+        normaliser's output, clipped to its action bounds."""
+        box, k, hidden = _check_policy_manifest(m)
+        policy = GaussianPolicy(m["obs_dim"], m["act_dim"], hidden)
+        stats = {key.removeprefix("normalizer."): v for key, v in tensors.items() if key.startswith("normalizer.")}
+        try:
+            load_module("policy", policy, tensors)
+            norm = RunningNormalizer.from_config(m["normalizer"], stats)
+        except ValueError as e:  # not expected after the checks; named all the same
+            raise CheckpointError(f"skill {name!r} ({self.root / name}): {_short(e, 200)}") from None
+        norm.freeze()
+        mean = NumpyMLP(policy.mean_net)
+        done = m.get("done") or {}
+        skill = PolicySkill(name, [tuple(p) for p in m["parts"]], m.get("param_part"), box,
+                            lambda x: mean(norm.normalize(x)), np.asarray(m["action_low"]), np.asarray(m["action_high"]),
+                            k=k, done_part=done.get("part"), done_within=done.get("within"))  # fmt: skip
+        skill.content_hash = sha256
+        return skill
+
+    def save(self, name: str, tensors: dict[str, torch.Tensor], manifest: dict[str, Any], overwrite: bool = False) -> Path:
+        """Write a policy skill (:data:`POLICY_FORMAT`) made elsewhere (:func:`hrlp.training.loading.policy_skill_files`)
+        as ``name``, after the checks :meth:`load` makes; returns its directory."""
+        check_skill_name(name)
+        target = self.root / name
+        if target.exists() and not overwrite:
+            raise ValueError(f"skill {name!r} already exists in {self.root}; pass overwrite to replace it")
+        m = {**manifest, "kind": "skill", "format": POLICY_FORMAT, "name": name}
+        try:
+            _check_policy_manifest(m)
+        except _SkillProblem as e:
+            raise ValueError(f"skill {name!r}: {e}") from None
+        return save_checkpoint(target, tensors, m)
+
 
 __all__ = [
     "FLOAT_DTYPES",
     "MAX_K",
+    "POLICY_FORMAT",
     "SKILL_LIMITS",
     "SkillLibrary",
     "check_skill_name",

@@ -122,9 +122,13 @@ def param_box(low: object, high: object, width: int, recorded: tuple[np.ndarray,
                              "parameters' box in your units)")  # fmt: skip
         low, high = recorded if low is None and high is None else (low if low is not None else recorded[0],
                                                                    high if high is not None else recorded[1])  # fmt: skip
-    lo = np.broadcast_to(np.asarray(low, dtype=np.float64), (width,))
-    hi = np.broadcast_to(np.asarray(high, dtype=np.float64), (width,))
-    return ParamBox.of(lo, hi)
+    bounds = []
+    for what, v in (("low", low), ("high", high)):
+        a = np.asarray(v, dtype=np.float64).reshape(-1)
+        if a.size not in (1, width):
+            raise ValueError(f"{who}: {what} must be one number or {width} (its parameter part's width), got {a.size}")
+        bounds.append(np.broadcast_to(a, (width,)))
+    return ParamBox.of(*bounds)
 
 
 def _positive(k: object, name: str) -> int:

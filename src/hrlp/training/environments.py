@@ -4,6 +4,7 @@ batched backend's constructors of N at once.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Callable
 from pathlib import Path
@@ -11,9 +12,11 @@ from typing import Any
 
 import gymnasium as gym
 
-from hrlp.config import MacroSpec, TrainConfig
-from hrlp.envs.batched import BatchedFactory, make_batched
-from hrlp.envs.registry import ArmEnvFactory
+from hrlp.config import MacroSpec, TrainConfig, auto_workers
+from hrlp.envs.actions import NormalisedParameters, is_parameterised, make_normalised
+from hrlp.envs.batched import VECTORISED, BatchedFactory, make_batched
+from hrlp.envs.check import gym_kwargs
+from hrlp.envs.registry import TASKS, ArmEnvFactory, make, probe_task
 from hrlp.envs.vector import VectorConstructor, VectorEnv
 from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv
 from hrlp.training.sources import resolve_skills
@@ -25,16 +28,12 @@ def env_factory(
     """A constructor for ``task`` (an hrlp task name/id, a Gymnasium id or ``MODULE:ID``), wrapped in a :class:`MacroEnv`
     of ``macro``'s skills (resolved once, shared, frozen: :mod:`hrlp.training.sources`) for a Manager. Raises
     ValueError, one line, before any compute, for an unknown task, an unknown or invalid argument, a missing optional
-    dependency, an unsupported space (:func:`hrlp.envs.check.probe_task`) or a bad skill reference; for a Gymnasium id,
+    dependency, an unsupported space (:func:`hrlp.envs.registry.probe_task`) or a bad skill reference; for a Gymnasium id,
     ``episode_steps`` is its time limit, a Dict observation is flattened in its key order (for a flat policy; a
     Manager's skills read its parts by name), and a parameterised action space (flat or nested Tuple, OneOf) is
     presented in the policy's canonical form with parameters in [-1, 1] (:class:`hrlp.envs.actions.NormalisedParameters`).
     The constructor can be pickled (sampler worker processes rebuild it; a Manager's skills are then resolved again
     there, from the same references)."""
-    from hrlp.envs import TASKS
-    from hrlp.envs.actions import is_parameterised, make_normalised
-    from hrlp.envs.check import gym_kwargs, probe_task
-
     name = task.removeprefix("hrlp/").removesuffix("-v0")
     observation_space, action_space = probe_task(task, episode_steps, **kwargs)  # validate now, before any compute
     if name in TASKS:
@@ -72,8 +71,6 @@ class _MacroFactory:
         self.hashes = skill_hashes(skills)
 
     def __call__(self) -> MacroEnv:
-        from hrlp.envs import make
-
         if self._skills is None:
             self._skills = resolve_skills(self.macro.skills, self.macro.library)
             check_skill_hashes(self.hashes, skill_hashes(self._skills), Path("skill library"))
@@ -102,6 +99,28 @@ class _BatchedMacroFactory(_MacroFactory, VectorConstructor):
         return BatchedMacroVectorEnv(make_batched(self.name, n, features=features, **self.kwargs), layout)
 
 
+def batchable_task(task: str) -> bool:
+    """Whether ``task`` (a name or id) is an hrlp arm task, whose worlds the batched backend steps together, flat or
+    under a Manager (:data:`hrlp.envs.batched.VECTORISED`)."""
+    name = task.removeprefix("hrlp/").removesuffix("-v0")
+    return name in TASKS and TASKS[name].task_type in VECTORISED
+
+
+def resolve_config(cfg: TrainConfig) -> TrainConfig:
+    """``cfg`` with a concrete number of sampling workers and a concrete backend: ``workers`` 0 becomes
+    :func:`hrlp.config.auto_workers`'s count for ``num_envs``, ``backend`` ``auto`` the batched backend for an arm task
+    (:func:`batchable_task`) and the serial one otherwise; what a run records and resumes with. Raises ValueError for
+    ``batched`` where it does not apply."""
+    if cfg.workers == 0:
+        cfg = dataclasses.replace(cfg, workers=auto_workers(cfg.num_envs))
+    batchable = batchable_task(cfg.task)
+    if cfg.backend == "auto":
+        cfg = dataclasses.replace(cfg, backend="batched" if batchable else "serial")
+    elif cfg.backend == "batched" and not batchable:
+        raise ValueError(f"backend batched steps hrlp's arm tasks; {cfg.task} is not one: use serial or auto")
+    return cfg
+
+
 def run_factory(cfg: TrainConfig, task_kwargs: dict[str, Any] | None = None) -> Callable[[], gym.Env]:
     """The constructor of one environment of ``cfg``'s run through its backend (:func:`batched_factory`'s for
     ``backend`` batched, else :func:`env_factory`'s); ``task_kwargs`` replace the config's task arguments."""
@@ -124,8 +143,6 @@ def batched_factory(factory: Callable[[], gym.Env]) -> VectorConstructor:
 def action_units(env: gym.Env) -> str:
     """``"normalised"`` for an environment whose parameterised actions the policy takes in [-1, 1]
     (:class:`hrlp.envs.actions.NormalisedParameters`), else ``"native"``: recorded in a run's checkpoint."""
-    from hrlp.envs.actions import NormalisedParameters
-
     return "normalised" if isinstance(env, NormalisedParameters) else "native"
 
 

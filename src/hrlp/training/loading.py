@@ -27,7 +27,7 @@ from hrlp.rollout import (
     action_decoder,
     build_vector_env,
 )
-from hrlp.skills.core import ObsLayout
+from hrlp.skills.core import ObsLayout, ParamBox
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.skills.policy import PolicySkill, param_box
 from hrlp.training.environments import (
@@ -165,34 +165,74 @@ def from_run(run_dir: str | Path, name: str | None = None, *, param: str | None 
     ``param`` names the part of the run's Dict observation its parameters replace (default ``desired_goal``; None
     for none, and for a run on a Box observation, which reads the part ``observation``); ``low``/``high`` bound them
     (default: that part's bounds in the run's environment, when finite); ``done_part``/``done_within`` end it early
-    (:class:`~hrlp.skills.policy.PolicySkill`)."""
+    (:class:`~hrlp.skills.policy.PolicySkill`). :func:`policy_skill_files` writes the same skill into a library."""
     run = Path(run_dir)
-    trained = load_trained(run)
-    if trained.config.macro is not None:
-        raise ValueError(f"{run}: a skill is a flat policy; this run trained a Manager")
-    env = trained.make_env()
-    space, action_space = _own_observation_space(env), env.action_space
-    env.close()
-    if not isinstance(action_space, gym.spaces.Box):
-        raise ValueError(f"{run}: a skill emits Box actions; this run's action space is {action_space}")
-    layout = ObsLayout.of_space(space)
-    parts = [(n, layout.width(n)) for n in layout.names]
-    if param is not None and param not in layout.names:
-        if isinstance(space, gym.spaces.Dict):
-            raise ValueError(f"{run}: no observation part {param!r} to take the parameters (its parts: "
-                             f"{', '.join(layout.names)}); name one with param=")  # fmt: skip
-        param = None
-    recorded = None
-    if param is not None and isinstance(space, gym.spaces.Dict):
-        sub = space.spaces[param]
-        recorded = (np.asarray(sub.low, np.float64).reshape(-1), np.asarray(sub.high, np.float64).reshape(-1))
-    box = param_box(low, high, layout.width(param) if param else 0, recorded, str(run))
+    trained, parts, param, box, action_space = _run_skill(run, param, low, high)
 
     def policy(x: np.ndarray) -> np.ndarray:
         return trained.act_rows(x, None, True)
 
     return PolicySkill(name or run.name, parts, param, box, policy, action_space.low, action_space.high, k=k,
                        done_part=done_part, done_within=done_within)  # fmt: skip
+
+
+def policy_skill_files(run_dir: str | Path, *, param: str | None = "desired_goal", low: object = None, high: object = None,
+                       k: int = 10, done_part: str | None = None,
+                       done_within: float | None = None) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:  # fmt: skip
+    """The tensors and manifest of :func:`from_run`'s skill as a library file (``hrlp skills add RUN --param ...``;
+    :meth:`hrlp.skills.library.SkillLibrary.save` writes them): the run's policy and frozen normaliser, the observation
+    parts it reads, its parameter part and box, its action bounds and its early end. Raises a one-line ValueError for a
+    run that cannot be one (checked as :func:`from_run` checks it)."""
+    run = Path(run_dir)
+    _, parts, param, box, action_space = _run_skill(run, param, low, high)
+    checked = dict(k=k, done_part=done_part, done_within=done_within)  # PolicySkill checks them
+    skill = PolicySkill(run.name, parts, param, box, lambda x: x, action_space.low, action_space.high, **checked)  # type: ignore[arg-type]
+    tensors, meta, cfg = read_run_checkpoint(run / "checkpoint")
+    kept = {key: v for key, v in tensors.items() if key.startswith(("policy.", "normalizer."))}
+    manifest = {
+        "task": cfg.task,
+        "k": skill.k,
+        "parts": [list(p) for p in parts],
+        "param_part": param,
+        "param": box.to_json(),
+        "done": None if done_part is None else {"part": done_part, "within": float(done_within)},  # type: ignore[arg-type]
+        "action_low": [float(v) for v in np.asarray(action_space.low, np.float64).reshape(-1)],
+        "action_high": [float(v) for v in np.asarray(action_space.high, np.float64).reshape(-1)],
+        "obs_dim": int(meta["obs_dim"]),
+        "act_dim": int(meta["act_dim"]),
+        "hidden": list(cfg.hidden),
+        "normalizer": meta["normalizer"],
+        "trained": {"config": meta["config"], "iteration": meta["iteration"], "env_steps": meta["env_steps"]},
+    }
+    return kept, manifest
+
+
+_RunSkill = tuple["TrainedPolicy", list[tuple[str, int]], str | None, ParamBox, gym.spaces.Box]
+
+
+def _run_skill(run: Path, param: str | None, low: object, high: object) -> _RunSkill:
+    """The trained run, the observation parts its policy reads, its parameter part and box, and its action space."""
+    trained = load_trained(run)
+    if trained.config.macro is not None:
+        raise ValueError(f"{run}: a skill is a flat policy; this run trained a Manager")
+    env = trained.make_env()
+    space, action_space = _own_observation_space(env), env.action_space
+    env.close()
+    if not isinstance(action_space, gym.spaces.Box) or not isinstance(trained.policy, GaussianPolicy):
+        raise ValueError(f"{run}: a skill emits Box actions; this run's action space is {action_space}")
+    layout = ObsLayout.of_space(space)
+    parts = [(n, layout.width(n)) for n in layout.names]
+    if param is not None and param not in layout.names:
+        if isinstance(space, gym.spaces.Dict):
+            raise ValueError(f"{run}: no observation part {param!r} to take the parameters (its parts: "
+                             f"{', '.join(layout.names)}); name another")  # fmt: skip
+        param = None
+    recorded = None
+    if param is not None and isinstance(space, gym.spaces.Dict):
+        sub = space.spaces[param]
+        recorded = (np.asarray(sub.low, np.float64).reshape(-1), np.asarray(sub.high, np.float64).reshape(-1))
+    box = param_box(low, high, layout.width(param) if param else 0, recorded, str(run))
+    return trained, parts, param, box, action_space
 
 
 def _own_observation_space(env: gym.Env) -> gym.Space:

@@ -43,7 +43,7 @@ from hrlp.rollout import (
     mean_or_nan,
 )
 from hrlp.skills.macro_env import MacroEnv
-from hrlp.training.environments import action_units, check_skill_hashes, run_factory, skill_hashes
+from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
 from hrlp.training.loading import check_action_units, warm_start
 from hrlp.training.logs import RunLogger, progress_line, truncate_log, update_stat
 
@@ -54,13 +54,14 @@ class Trainer:
     With ``cfg.workers > 1`` this process computes with one torch thread while the workers sample (the baseline fit
     runs then, and more threads would only compete with them for the cores), and with one thread per worker (at most
     one per core) for the TRPO step, while the workers wait for the next batch's weights. A config whose ``workers``
-    is 0 (the default) is run with the count :meth:`TrainConfig.resolved` gives, which ``self.cfg`` records.
+    is 0 (the default) is run with the count :func:`~hrlp.training.environments.resolve_config` gives, which
+    ``self.cfg`` records.
     """
 
     def __init__(self, cfg: TrainConfig, *, from_checkpoint: bool = False) -> None:
         """``from_checkpoint``: the weights will be loaded from a checkpoint (:meth:`resume`), so ``cfg.init_from`` is
         not read again (the skill it names may have changed or gone since the run started)."""
-        self.cfg = cfg = cfg.resolved()
+        self.cfg = cfg = resolve_config(cfg)
         factory = run_factory(cfg)  # batched: every world of a process's share in one VectorEnv (build_vector_env)
         torch.manual_seed(cfg.seed)
         probe = factory()
