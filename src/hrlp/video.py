@@ -190,14 +190,15 @@ def rollout_frames(
     low = env.env if isinstance(env, MacroEnv) else env.unwrapped
     if isinstance(low, ArmEnv):
         n, fps = steps or low.episode_steps, int(low.metadata["render_fps"])
-    else:  # a Gymnasium run: its time limit (else 1,000 steps) and its frame rate (else 30)
-        modes = env.metadata.get("render_modes", [])
+    else:  # a Gymnasium run (flat or a Manager's): its time limit (else 1,000 steps) and its frame rate (else 30)
+        own = env.env if isinstance(env, MacroEnv) else env
+        modes = own.metadata.get("render_modes", [])
         if "rgb_array" not in modes:
             env.close()
-            raise ValueError(f"{source}: {env.spec.id if env.spec else 'its environment'} does not draw frames "
+            raise ValueError(f"{source}: {own.spec.id if own.spec else 'its environment'} does not draw frames "
                              f"(render modes {modes}; a video needs 'rgb_array')")  # fmt: skip
-        n = steps or (env.spec.max_episode_steps if env.spec and env.spec.max_episode_steps else 1000)
-        fps = int(env.metadata.get("render_fps") or 30)
+        n = steps or (own.spec.max_episode_steps if own.spec and own.spec.max_episode_steps else 1000)
+        fps = int(own.metadata.get("render_fps") or 30)
 
     def frames() -> Iterator[np.ndarray]:
         if isinstance(env, MacroEnv):

@@ -94,9 +94,8 @@ def from_sb3(path: str | Path, name: str | None = None, *, param: str | None = "
     """A skill from a Stable-Baselines3 PPO, SAC or TD3 ``.zip`` (read without unpickling, :mod:`hrlp.skills.sb3`).
 
     ``param`` names the observation part its parameters replace (for a policy trained on a Dict observation; default
-    ``desired_goal``, None for none); ``low``/``high`` bound the parameters in the user's units (default: that part's
-    bounds as recorded in the file, when finite). A policy trained on a Box observation reads the part
-    ``observation`` of its new environment."""
+    ``desired_goal``, None for none); ``low``/``high`` bound the parameters in the user's units (required for a
+    parameter part). A policy trained on a Box observation reads the part ``observation`` of its new environment."""
     p = load_sb3(path)
     skill_name = name or Path(path).stem
     parts = p.obs_parts
@@ -106,7 +105,7 @@ def from_sb3(path: str | Path, name: str | None = None, *, param: str | None = "
                              f"{', '.join(n for n, _ in parts)}); name one with param=")  # fmt: skip
         param = None
     width = dict(parts).get(param, 0) if param else 0
-    box = param_box(low, high, width, getattr(p, "part_bounds", lambda _: None)(param) if param else None, f"{path}")
+    box = param_box(low, high, width, None, f"{path}")  # an SB3 file records a Dict's bounds only as text: not read
     return PolicySkill(skill_name, parts, param, box, p.act, p.action_low, p.action_high, k=k, done_part=done_part,
                        done_within=done_within)  # fmt: skip
 
