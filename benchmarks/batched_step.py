@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hrlp.envs import make
-from hrlp.envs.batched import make_batched
+from hrlp.arm import make
+from hrlp.arm.batched import make_batched
 from hrlp.envs.vector import SerialVectorEnv, VectorEnv
 
 

@@ -20,9 +20,9 @@ import argparse
 
 import numpy as np
 
+from hrlp.arm import make
+from hrlp.arm.physics import CAPSULE_REST_Z
 from hrlp.config import Handover
-from hrlp.envs import make
-from hrlp.envs.physics import CAPSULE_REST_Z
 from hrlp.evaluate import wilson_interval
 from hrlp.skills import load_skill
 from hrlp.skills.macro_env import MacroEnv, step_macros

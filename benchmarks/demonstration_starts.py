@@ -16,7 +16,7 @@ import math
 import time
 from pathlib import Path
 
-from hrlp.envs.tasks import HANDOVER_BANK
+from hrlp.arm.tasks import HANDOVER_BANK
 from hrlp.skills.scripted import ScriptedGraspConfig
 from hrlp.skills.starts import record_grip_starts, write_start_bank
 

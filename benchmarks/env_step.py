@@ -16,7 +16,7 @@ import time
 import mujoco
 import numpy as np
 
-from hrlp.envs import TASKS, make
+from hrlp.arm import TASKS, make
 
 
 def physics_only(env, actions: np.ndarray) -> float:

@@ -24,8 +24,8 @@ import argparse
 
 import numpy as np
 
-from hrlp.envs.arm_env import ArmEnv
-from hrlp.envs.tasks import GripperTask, GripReward
+from hrlp.arm.env import ArmEnv
+from hrlp.arm.tasks import GripperTask, GripReward
 from hrlp.experiments.presets import GRIPPER_START
 from hrlp.skills import load_skill
 

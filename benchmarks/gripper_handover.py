@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from hrlp.envs.arm_env import ArmEnv
-from hrlp.envs.physics import ArmPhysics
-from hrlp.envs.tasks import HANDOVER_BANK, GripperTask, SparseSuccess
+from hrlp.arm.env import ArmEnv
+from hrlp.arm.physics import ArmPhysics
+from hrlp.arm.tasks import HANDOVER_BANK, GripperTask, SparseSuccess
 from hrlp.evaluate import Interval, wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
 from hrlp.skills import ArmSkill as Skill

@@ -11,7 +11,7 @@ how often the skill pushed, and how often it gripped all the same after a push.
 
     python benchmarks/gripper_recovery.py --out runs/recovery.npz
 
-With its defaults it writes the bank shipped as ``src/hrlp/envs/assets/gripper_recovery_starts.npz``
+With its defaults it writes the bank shipped as ``src/hrlp/arm/assets/gripper_recovery_starts.npz``
 (``GripperTask(starts="recovery")``, on which the shipped ``gripper-recovery`` was trained).
 
 An existing ``--out`` is never replaced.
@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hrlp.envs.arm_env import ArmEnv
-from hrlp.envs.tasks import HANDOVER_BANK, GripperTask
+from hrlp.arm.env import ArmEnv
+from hrlp.arm.tasks import HANDOVER_BANK, GripperTask
 from hrlp.evaluate import wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
 from hrlp.skills import load_skill

@@ -45,8 +45,8 @@ START_SETS = (
 
 def graspable_bank(bank: Path, out: Path, max_hand_distance: float, max_capsule_speed: float) -> Path:
     """Write the states of ``bank`` from which a grip can start (:func:`hrlp.skills.dagger.graspable`) to ``out``."""
-    from hrlp.envs import make
-    from hrlp.envs.tasks import HANDOVER_BANK, start_bank
+    from hrlp.arm import make
+    from hrlp.arm.tasks import HANDOVER_BANK, start_bank
     from hrlp.skills.dagger import graspable
     from hrlp.skills.starts import write_start_bank
 

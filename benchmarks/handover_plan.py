@@ -15,8 +15,8 @@ import argparse
 
 import numpy as np
 
+from hrlp.arm import make
 from hrlp.config import Handover
-from hrlp.envs import make
 from hrlp.skills import load_skill
 from hrlp.skills.macro_env import MacroEnv, step_macros
 

@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from hrlp.envs.registry import make
+from hrlp.arm.registry import make
 from hrlp.evaluate import wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
 from hrlp.policies.mlp import policy_for_space

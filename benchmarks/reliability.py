@@ -144,9 +144,9 @@ def blow_ups(per_kind: int, verbose: bool) -> str:
     import numpy as np
     from test_reliability_physics import BLOW_UPS
 
-    from hrlp.envs import make
+    from hrlp.arm import make
 
-    logging.getLogger("hrlp.envs.arm_env").setLevel(logging.ERROR)  # each blow-up is logged as a warning: counted here
+    logging.getLogger("hrlp.arm.env").setLevel(logging.ERROR)  # each blow-up is logged as a warning: counted here
     mujoco.set_mju_user_warning(lambda message: None)  # and printed by MuJoCo (its warning counters stay as they are)
     rng = np.random.default_rng(2)
     forced = flagged = false_alarms = ordinary = 0

@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 
-from hrlp.envs.arm_env import ArmEnv
-from hrlp.envs.physics import BASE_AXIS_XY, N_JOINTS
-from hrlp.envs.tasks import GripperTask
+from hrlp.arm.env import ArmEnv
+from hrlp.arm.physics import BASE_AXIS_XY, N_JOINTS
+from hrlp.arm.tasks import GripperTask
 from hrlp.evaluate import wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
 from hrlp.skills.scripted import ScriptedGrasp, ScriptedGraspConfig

@@ -16,7 +16,7 @@ import time
 import mujoco
 import numpy as np
 
-from hrlp.envs import PhysicsConfig, make
+from hrlp.arm import PhysicsConfig, make
 
 SETTINGS = [
     ("euler", 0.002, 5),

@@ -199,7 +199,7 @@ def pusher_physics(n: int) -> float:
 def arm_physics(n: int, episode: int = 300) -> float:
     """Seconds per control step of bare ``mj_step`` on the arm task from its own start states (the task resets every
     ``episode`` steps), random controls: the physics a training run on it pays for, without anything around it."""
-    from hrlp.envs import make
+    from hrlp.arm import make
 
     env = make(ARM_TASK)
     env.reset(seed=0)

@@ -1,7 +1,7 @@
-"""Record the Mover's start states from a Gripper skill (``src/hrlp/envs/assets/mover_starts.npz``).
+"""Record the Mover's start states from a Gripper skill (``src/hrlp/arm/assets/mover_starts.npz``).
 
-    python scripts/make_mover_starts.py [--states 2000] [--seed 0] [--out src/hrlp/envs/assets/mover_starts.npz]
-    python scripts/make_mover_starts.py --held      # the "held" starts, src/hrlp/envs/assets/mover_held_starts.npz
+    python scripts/make_mover_starts.py [--states 2000] [--seed 0] [--out src/hrlp/arm/assets/mover_starts.npz]
+    python scripts/make_mover_starts.py --held      # the "held" starts, src/hrlp/arm/assets/mover_held_starts.npz
 
 plain: the capsule within 0.2 rad of straight ahead; noised: anywhere on the circle (hrlp.skills.starts). The grip
 starts follow the shipped ``gripper``'s successful episodes from start to end; the held starts (``--held``) keep the
@@ -14,7 +14,7 @@ import argparse
 import math
 from pathlib import Path
 
-from hrlp.envs.tasks import MOVER_HELD_STARTS_FILE, MOVER_STARTS_FILE
+from hrlp.arm.tasks import MOVER_HELD_STARTS_FILE, MOVER_STARTS_FILE
 from hrlp.skills.library import load_skill
 from hrlp.skills.starts import record_grip_starts, write_start_bank
 

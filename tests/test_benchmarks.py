@@ -60,8 +60,8 @@ def test_manager_vs_flat_runs_and_reuses_finished_runs(tmp_path):
 
 
 def test_gripper_variants_retrains_the_shipped_gripper_and_reports_both_start_sets(tmp_path):
-    from hrlp.envs import make
-    from hrlp.envs.tasks import HANDOVER_BANK
+    from hrlp.arm import make
+    from hrlp.arm.tasks import HANDOVER_BANK
     from hrlp.skills.starts import write_start_bank
 
     env = make("Gripper")
@@ -100,8 +100,8 @@ def test_gripper_handover_collects_four_banks_and_evaluates_every_start_set(tmp_
     assert set(results["gripper-imitated"]) == {"own", "paper", "all", "not_held", "initiation_not_held", "switch_not_held"}
     for bank in ("all", "not_held", "initiation_not_held", "switch_not_held"):
         assert f"bank {bank}: 2 hand-over states" in out.stdout and (tmp_path / "gh" / f"{bank}.npz").is_file()
-    from hrlp.envs import make
-    from hrlp.envs.tasks import SparseSuccess, start_bank
+    from hrlp.arm import make
+    from hrlp.arm.tasks import SparseSuccess, start_bank
     from hrlp.skills import load_skill
 
     env = make("Gripper")
@@ -126,7 +126,7 @@ def test_gripper_handover_collects_four_banks_and_evaluates_every_start_set(tmp_
 def test_gripper_recovery_writes_the_first_states_of_the_shipped_recovery_banks(tmp_path, bank, args, skill):
     from importlib import resources
 
-    from hrlp.envs.tasks import GRIPPER_BANKS, gripper_start_bank, start_bank
+    from hrlp.arm.tasks import GRIPPER_BANKS, gripper_start_bank, start_bank
     from hrlp.skills import SkillLibrary, shipped_library_root
 
     out = _run("gripper_recovery.py", f"{args} --episodes 60 --out {tmp_path / 'b.npz'}", tmp_path)
@@ -136,7 +136,7 @@ def test_gripper_recovery_writes_the_first_states_of_the_shipped_recovery_banks(
     assert 0 < len(qpos) < len(shipped_qpos)  # the command's first 60 episodes: a prefix of the shipped bank's 3,000
     np.testing.assert_array_equal(qpos, shipped_qpos[: len(qpos)])
     np.testing.assert_array_equal(qvel, shipped_qvel[: len(qvel)])
-    with np.load(resources.files("hrlp.envs").joinpath(GRIPPER_BANKS[bank])) as z:  # recorded from this skill
+    with np.load(resources.files("hrlp.arm").joinpath(GRIPPER_BANKS[bank])) as z:  # recorded from this skill
         assert str(z["meta_skill_sha256"]) == SkillLibrary(shipped_library_root()).load(skill).content_hash
     again = _run("gripper_recovery.py", f"--episodes 1 --out {tmp_path / 'b.npz'}", tmp_path)
     assert again.returncode != 0 and "exists" in again.stderr

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from hrlp.envs import make
+from hrlp.arm import make
 from hrlp.policies.mlp import GaussianPolicy
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import ParallelSampler, Sampler
@@ -62,7 +62,7 @@ def test_a_failing_worker_raises_its_error():
 
 _ORPHAN_SCRIPT = """
 import functools, os, signal, sys
-from hrlp.envs import make
+from hrlp.arm import make
 from hrlp.policies.mlp import GaussianPolicy
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import ParallelSampler

@@ -155,7 +155,7 @@ _BATCH_CHECK = check.count(None, bounds.MAX_BATCH_STEPS, bounds.WHY_BATCH_STEPS)
 @app.command()
 def tasks() -> None:
     """List the registered tasks (Gymnasium ids) with their observation and action sizes."""
-    from hrlp.envs import TASKS
+    from hrlp.arm import TASKS
 
     table = Table(title="hrlp tasks")
     for col in ("id", "obs", "act", "description"):
@@ -196,7 +196,7 @@ def render(
 
 def _check_render_source(source: str) -> None:
     """Raise ValueError unless ``source`` is an hrlp task or an existing run directory, saying which it was taken for."""
-    from hrlp.envs import TASKS
+    from hrlp.arm import TASKS
 
     if source.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
         return
@@ -747,7 +747,7 @@ _HANDOVER_OPTIONS = ("handover_approach_height", "handover_open_torque", "handov
 
 def _is_arm_task(task: str) -> bool:
     """Whether ``task`` names one of hrlp's arm tasks (whose Reachers and Movers hand-over drives)."""
-    from hrlp.envs.registry import TASKS
+    from hrlp.arm.registry import TASKS
 
     return task.removeprefix("hrlp/").removesuffix("-v0") in TASKS
 
@@ -838,9 +838,9 @@ def _episode_length_defaults(ctx: typer.Context, task: str) -> str:
     ``ctx.params`` for the options left out and return the note that says so ("" when nothing changes). The defaults
     suit 300-step episodes: on 1-10-decision episodes a 50,000-decision batch is a whole 20,000-episode budget. hrlp's
     own arm tasks keep the paper's settings whatever ``--episode-steps``."""
-    from hrlp.envs import TASKS
+    from hrlp.arm import TASKS
+    from hrlp.arm.registry import declared_episode_steps
     from hrlp.envs.check import SHORT_EPISODE_SETTINGS, SHORT_EPISODE_STEPS
-    from hrlp.envs.registry import declared_episode_steps
 
     left_out = [name for name in SHORT_EPISODE_SETTINGS if not _given(ctx, name)]
     if not left_out or task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
@@ -908,9 +908,9 @@ def _check_task(task: str, episode_steps: int | None, task_arg: list[str] | None
     and options given on the command line that the task would silently ignore."""
     import gymnasium as gym
 
-    from hrlp.envs import TASKS
+    from hrlp.arm import TASKS
+    from hrlp.arm.registry import probe_task
     from hrlp.envs.check import invalid_arguments_line
-    from hrlp.envs.registry import probe_task
 
     kwargs = parse_task_args(task_arg)
     name = task.removeprefix("hrlp/").removesuffix("-v0")

@@ -310,7 +310,7 @@ class TrainConfig:
     the number it used, and a resume keeps it."""
     backend: str = "auto"
     """How each process steps its environments: ``batched`` (the worlds of an hrlp arm task in one
-    :class:`~hrlp.envs.batched.BatchedArmEnv`, MuJoCo's rollout module, task arithmetic as arrays; a Manager's skills
+    :class:`~hrlp.arm.batched.BatchedArmEnv`, MuJoCo's rollout module, task arithmetic as arrays; a Manager's skills
     act on every world at once), ``serial`` (one environment object each, the paper's settings: bit for bit the runs
     made before the batched backend) or ``auto`` (the default: batched for an hrlp task, serial for a Gymnasium id).
     A run records the one it used."""

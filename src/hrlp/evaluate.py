@@ -213,7 +213,7 @@ def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, determin
 
 def _capsule_target_spans(env: gym.Env) -> tuple[slice, slice] | None:
     """Where the capsule C and the target T lie in the observation of a task that names both parts (the arm's moving
-    tasks, :attr:`hrlp.envs.arm_env.ArmEnv.observation_parts`), for the reach-and-move figures; None for any other
+    tasks, :attr:`hrlp.arm.env.ArmEnv.observation_parts`), for the reach-and-move figures; None for any other
     environment. Closes ``env``."""
     try:
         layout = env.layout if isinstance(env, MacroEnv) else ObsLayout.of_space(

@@ -5,7 +5,7 @@ Per-observation policy calls, not physics, are what make RL libraries slow on sm
 policy for ``N`` actions at once. It sees them only as a :class:`~hrlp.envs.vector.VectorEnv`
 (one step record, same-step autoreset): ordinary Gymnasium environments (:class:`~hrlp.envs.vector.SerialVectorEnv`),
 a Manager's macro-action environments (:class:`~hrlp.skills.macro_env.MacroVectorEnv`, batched skill
-inference) or a batched physics backend (:class:`~hrlp.envs.batched.BatchedArmEnv`) go through the same
+inference) or a batched physics backend (:class:`~hrlp.arm.batched.BatchedArmEnv`) go through the same
 loop, and every batch carries the per-decision discount (gamma for a flat step, gamma^tau for a
 macro-action of tau low-level steps). Time is accounted per phase (environment, inference) so a
 training run can report where its wall time goes.
@@ -119,7 +119,7 @@ def vector_env(envs: Sequence[gym.Env], gamma: float | None = None) -> VectorEnv
 def build_vector_env(env_fns: Sequence[Callable[[], gym.Env]], gamma: float | None = None) -> VectorEnv:
     """The :class:`~hrlp.envs.vector.VectorEnv` of ``env_fns``: the constructor's own when every one is the same
     :class:`~hrlp.envs.vector.VectorConstructor` (the batched backend of ``TrainConfig.backend``: a
-    :class:`~hrlp.envs.batched.BatchedArmEnv`, or a Manager's :class:`~hrlp.skills.macro_env.BatchedMacroVectorEnv`),
+    :class:`~hrlp.arm.batched.BatchedArmEnv`, or a Manager's :class:`~hrlp.skills.macro_env.BatchedMacroVectorEnv`),
     else :func:`vector_env` of the environments they build."""
     first = env_fns[0]
     if isinstance(first, VectorConstructor) and all(fn is first for fn in env_fns):
@@ -132,7 +132,7 @@ class Sampler:
 
     Args:
         env_fns: one constructor per environment (stepped by :func:`build_vector_env`), or a ready VectorEnv (e.g. a
-            :class:`~hrlp.envs.batched.BatchedArmEnv`), which the sampler then owns.
+            :class:`~hrlp.arm.batched.BatchedArmEnv`), which the sampler then owns.
         policy: the policy; called once per step on ``[N, obs_dim]``.
         normalizer: observation normaliser. Its statistics stay fixed during a batch, so the policy and the value
             baseline see every observation of the batch normalised alike; they are updated with the batch's raw

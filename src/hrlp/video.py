@@ -84,7 +84,7 @@ def check_rendering(width: int, height: int) -> None:
 
     import mujoco
 
-    from hrlp.envs.physics import model_xml
+    from hrlp.arm.physics import model_xml
 
     model = mujoco.MjModel.from_xml_string(model_xml())
     max_w, max_h = int(model.vis.global_.offwidth), int(model.vis.global_.offheight)
@@ -164,7 +164,7 @@ def rollout_frames(
     import torch
     from rich.progress import Progress
 
-    from hrlp.envs import TASKS, ArmEnv, make
+    from hrlp.arm import TASKS, ArmEnv, make
     from hrlp.rollout import vector_env
     from hrlp.skills.macro_env import MacroEnv
 

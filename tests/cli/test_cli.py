@@ -2,8 +2,8 @@
 
 from typer.testing import CliRunner
 
+from hrlp.arm import TASKS
 from hrlp.cli import app
-from hrlp.envs import TASKS
 
 
 def test_tasks_lists_every_registered_id():

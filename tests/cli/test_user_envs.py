@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from hrlp.arm.registry import probe_task
 from hrlp.envs.check import registered_gym_id
-from hrlp.envs.registry import probe_task
 from hrlp.evaluate import evaluate_run
 from hrlp.runs import read_run
 from hrlp.train import TrainConfig, read_run_checkpoint, train
@@ -157,9 +157,9 @@ def test_short_episodes_get_short_episode_settings(tmp_path):
     # longer tasks keep the defaults.
     from typer.testing import CliRunner
 
+    from hrlp.arm.registry import declared_episode_steps
     from hrlp.cli import app
     from hrlp.envs.check import SHORT_EPISODE_SETTINGS
-    from hrlp.envs.registry import declared_episode_steps
 
     assert declared_episode_steps("hrlp/ParamBandit-v0") == 1 and declared_episode_steps("Pendulum-v1") == 200
     assert declared_episode_steps("Reacher") == 300 and declared_episode_steps("Pendulum-v1", 20) == 20

@@ -15,8 +15,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from hrlp.envs import PhysicsConfig, make
-from hrlp.envs.batched import (
+from hrlp.arm import PhysicsConfig, make
+from hrlp.arm.batched import (
     BatchedArmEnv,
     Measurements,
     capsule_pose_rows,
@@ -28,8 +28,8 @@ from hrlp.envs.batched import (
     math_dist_rows,
     measured_model,
 )
-from hrlp.envs.physics import ArmPhysics, load_model
-from hrlp.envs.tasks import GripperTask, GripReward, ReachAndGripTask, Task
+from hrlp.arm.physics import ArmPhysics, load_model
+from hrlp.arm.tasks import GripperTask, GripReward, ReachAndGripTask, Task
 from hrlp.envs.vector import SerialVectorEnv, VectorEnv, VectorStep, check_actions, info_arrays
 
 ROLLOUT_ATOL = 1e-6
@@ -217,7 +217,7 @@ def test_task_options_give_the_same_episodes_bit_for_bit(task: Task):
 def _arm_env(task: Task, episode: int):
     import copy
 
-    from hrlp.envs.arm_env import ArmEnv
+    from hrlp.arm.env import ArmEnv
 
     return ArmEnv(copy.deepcopy(task), episode_steps=episode)
 

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from hrlp.envs import make
-from hrlp.envs.physics import CAPSULE_REST_Z
+from hrlp.arm import make
+from hrlp.arm.physics import CAPSULE_REST_Z
 from hrlp.evaluate import evaluate_run
 from hrlp.experiments.tables import move_cell
 from hrlp.train import TrainConfig, train

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from hrlp.envs import BASE_OBS_DIM, JOINTS, ArmPhysics, PhysicsConfig
+from hrlp.arm import BASE_OBS_DIM, JOINTS, ArmPhysics, PhysicsConfig
 
 GEARS = [100, 100, 100, 70, 70, 30, 30, 10, 10]
 RANGES = [

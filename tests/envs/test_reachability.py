@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from hrlp.envs import TASKS, ArmPhysics, make
-from hrlp.envs.tasks import CIRCLE_RADIUS, PALM_CIRCLE_Z, circle_point, is_reachable
+from hrlp.arm import TASKS, ArmPhysics, make
+from hrlp.arm.tasks import CIRCLE_RADIUS, PALM_CIRCLE_Z, circle_point, is_reachable
 
 SAMPLES = 12
 

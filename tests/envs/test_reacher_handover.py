@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from hrlp.envs import make
-from hrlp.envs.physics import CAPSULE_RADIUS
-from hrlp.envs.tasks import HANDOVER_GOAL_HIGH, HANDOVER_GOAL_LOW, claw_closure
+from hrlp.arm import make
+from hrlp.arm.physics import CAPSULE_RADIUS
+from hrlp.arm.tasks import HANDOVER_GOAL_HIGH, HANDOVER_GOAL_LOW, claw_closure
 from hrlp.skills import PARAM_SPECS
 from hrlp.skills.skill import POINT_TASKS
 

@@ -4,8 +4,8 @@ import imageio.v2 as imageio
 import numpy as np
 from typer.testing import CliRunner
 
+from hrlp.arm import make
 from hrlp.cli import app
-from hrlp.envs import make
 
 
 def test_render_returns_an_rgb_frame_that_changes_with_the_state():

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import hrlp.envs  # noqa: F401  (registers the ids)
-from hrlp.envs import TASKS, make
-from hrlp.envs.physics import CLEARANCE_BODIES
-from hrlp.envs.tasks import GripperTask, GripReward, ReachAndGripTask, SparseSuccess
+import hrlp.arm  # noqa: F401  (registers the ids)
+from hrlp.arm import TASKS, make
+from hrlp.arm.physics import CLEARANCE_BODIES
+from hrlp.arm.tasks import GripperTask, GripReward, ReachAndGripTask, SparseSuccess
 
 NAMES = list(TASKS)
 
@@ -82,7 +82,7 @@ def test_physics_blow_up_truncates_with_a_flag_and_a_logged_warning(caplog):
     _obs0, _ = env.reset(seed=0)
     obs1, *_ = env.step(np.zeros(9))
     env.physics.data.qvel[:] = 1e12
-    with caplog.at_level(logging.WARNING, logger="hrlp.envs.arm_env"):
+    with caplog.at_level(logging.WARNING, logger="hrlp.arm.env"):
         obs, reward, terminated, truncated, info = env.step(np.zeros(9))
     assert truncated and not terminated and info["physics_unstable"]
     assert "unstable" in caplog.text

@@ -24,9 +24,9 @@ import pytest
 import torch
 
 from hrlp.algos.kernels import discounted_returns, gae
+from hrlp.arm import make
+from hrlp.arm.batched import make_batched
 from hrlp.config import MicroAction
-from hrlp.envs import make
-from hrlp.envs.batched import make_batched
 from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorEnv, VectorStep, action_decoder
 from hrlp.policies.mlp import policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer

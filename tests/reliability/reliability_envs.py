@@ -57,7 +57,7 @@ class Poisoned(gym.Wrapper):
 
 def make_poisoned(task: str = "Reacher", episode_steps: int = 30, **kwargs: Any) -> Poisoned:
     """A real hrlp task (``hrlp.envs.make``) behind :class:`Poisoned`."""
-    from hrlp.envs import make
+    from hrlp.arm import make
 
     return Poisoned(make(task, episode_steps=episode_steps), **kwargs)
 

@@ -6,8 +6,8 @@ import logging
 import numpy as np
 import pytest
 
-from hrlp.envs import make
-from hrlp.envs.physics import ArmPhysics
+from hrlp.arm import make
+from hrlp.arm.physics import ArmPhysics
 
 #: Ways to force a blow-up: each trips one of MuJoCo's checks (mj_checkPos, mj_checkVel, mj_checkAcc).
 BLOW_UPS = {
@@ -23,7 +23,7 @@ def test_every_forced_blow_up_is_flagged_at_any_step(caplog):
     flagged, forced = 0, 0
     env = make("Reacher", episode_steps=100)
     rng = np.random.default_rng(0)
-    with caplog.at_level(logging.ERROR, logger="hrlp.envs.arm_env"):  # the env logs each one as a warning
+    with caplog.at_level(logging.ERROR, logger="hrlp.arm.env"):  # the env logs each one as a warning
         for kind, force in BLOW_UPS.items():
             for at in STEPS:
                 env.reset(seed=at)

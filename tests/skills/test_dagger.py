@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from hrlp.arm import make
+from hrlp.arm.tasks import start_bank
 from hrlp.cli import app
 from hrlp.config import Handover, MacroSpec
-from hrlp.envs import make
-from hrlp.envs.tasks import start_bank
 from hrlp.skills import SkillLibrary, load_skill
 from hrlp.skills.dagger import DaggerConfig, collect_handover_states, graspable, run_round
 from hrlp.skills.starts import write_start_bank
@@ -84,7 +84,7 @@ def test_the_graspable_filter_keeps_only_close_states_with_the_capsule_at_rest(m
 
 @pytest.mark.parametrize("bank", ["recovery", "recovery-2"])
 def test_the_shipped_recovery_banks_are_start_sets_by_name(bank):
-    from hrlp.envs.tasks import gripper_start_bank
+    from hrlp.arm.tasks import gripper_start_bank
 
     qpos, _ = gripper_start_bank(bank)
     env = make("Gripper", starts=bank, starts_fraction=1.0)

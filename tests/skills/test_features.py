@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hrlp.arm import make
+from hrlp.arm.batched import make_batched
 from hrlp.config import MacroSpec
-from hrlp.envs import make
-from hrlp.envs.batched import make_batched
 from hrlp.skills import SkillLibrary
 from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv
 from hrlp.train import TrainConfig, load_policy, train

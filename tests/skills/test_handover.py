@@ -6,9 +6,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from hrlp.arm import make
 from hrlp.checkpoint import CheckpointError
 from hrlp.config import Handover, MacroSpec, MicroAction
-from hrlp.envs import make
 from hrlp.skills import PARAM_SPECS, ParamSpec, SkillLibrary, load_skill
 from hrlp.skills.macro_env import MacroEnv, step_macros
 from hrlp.skills.skill import HANDOVER_POINT, HANDOVER_TARGET
@@ -244,7 +244,7 @@ def _base(hand, capsule):
 
 
 def test_initiation_sets_hold_where_their_skills_were_trained_to_start():
-    from hrlp.envs.physics import CAPSULE_REST_Z
+    from hrlp.arm.physics import CAPSULE_REST_Z
     from hrlp.skills.skill import Initiation
 
     rest, up = CAPSULE_REST_Z, CAPSULE_REST_Z + 0.02
@@ -365,7 +365,7 @@ def test_a_chosen_skill_goes_on_where_it_left_the_arm_and_the_mover_starts_once_
 
 @pytest.mark.parametrize("backend", ["loop", "rollout"])
 def test_initiation_sets_run_the_same_macro_actions_in_the_batched_worlds(backend):
-    from hrlp.envs.batched import make_batched
+    from hrlp.arm.batched import make_batched
     from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroVectorEnv
 
     n, skills = 4, _carry_skills()

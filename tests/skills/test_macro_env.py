@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
+from hrlp.arm import make
 from hrlp.config import MicroAction
-from hrlp.envs import make
 from hrlp.skills import SkillLibrary
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.train import TrainConfig, train

@@ -8,9 +8,9 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from hrlp.arm import make
 from hrlp.cli import app
 from hrlp.config import MacroSpec, MicroAction
-from hrlp.envs import make
 from hrlp.evaluate import evaluate_run
 from hrlp.policies.mlp import HierarchicalPolicy
 from hrlp.skills import SkillLibrary

@@ -4,8 +4,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from hrlp.envs.arm_env import ArmEnv
-from hrlp.envs.tasks import GripperTask
+from hrlp.arm.env import ArmEnv
+from hrlp.arm.tasks import GripperTask
 from hrlp.experiments.presets import GRIPPER_START
 from hrlp.skills.scripted import ScriptedGrasp
 
@@ -105,7 +105,7 @@ def test_imitation_writes_a_run_that_eval_reads_and_trpo_fine_tunes(tmp_path):
 
 
 def _gripper_env(steps: int = 15):
-    from hrlp.envs.registry import make
+    from hrlp.arm.registry import make
     from hrlp.experiments.presets import GRIPPER_START
 
     return make("Gripper", episode_steps=steps, **GRIPPER_START).unwrapped

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from hrlp.arm import make
 from hrlp.checkpoint import CheckpointError
 from hrlp.cli import app
-from hrlp.envs import make
 from hrlp.experiments.presets import PRESETS
 from hrlp.skills import SkillLibrary
 from hrlp.train import TrainConfig, load_policy, train

@@ -6,8 +6,8 @@ from importlib import resources
 import numpy as np
 import pytest
 
-from hrlp.envs import make
-from hrlp.envs.tasks import MOVER_HELD_STARTS_FILE, MOVER_STARTS_FILE, grip_starts
+from hrlp.arm import make
+from hrlp.arm.tasks import MOVER_HELD_STARTS_FILE, MOVER_STARTS_FILE, grip_starts
 from hrlp.skills.library import load_skill
 from hrlp.skills.starts import record_grip_starts, write_start_bank
 
@@ -32,7 +32,7 @@ def test_recorded_states_come_from_episodes_in_which_the_gripper_grips():
 
 
 def test_shipped_bank_matches_the_shipped_gripper_and_its_variants():
-    with resources.files("hrlp.envs").joinpath(MOVER_STARTS_FILE).open("rb") as f, np.load(f, allow_pickle=False) as z:
+    with resources.files("hrlp.arm").joinpath(MOVER_STARTS_FILE).open("rb") as f, np.load(f, allow_pickle=False) as z:
         assert str(z["meta_skill_sha256"]) == load_skill("gripper").content_hash
     env = make("Gripper")
     env.reset(seed=0)
@@ -57,7 +57,7 @@ def test_held_recording_keeps_only_states_with_the_capsule_in_the_claw():
 
 
 def test_shipped_held_bank_matches_gripper_imitated_and_every_state_is_held():
-    with resources.files("hrlp.envs").joinpath(MOVER_HELD_STARTS_FILE).open("rb") as f, np.load(f, allow_pickle=False) as z:
+    with resources.files("hrlp.arm").joinpath(MOVER_HELD_STARTS_FILE).open("rb") as f, np.load(f, allow_pickle=False) as z:
         assert str(z["meta_skill_sha256"]) == load_skill("gripper-imitated").content_hash
         assert str(z["meta_held"]) == "True"
     env = make("Gripper")

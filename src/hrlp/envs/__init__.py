@@ -1,27 +1,10 @@
-"""The arm with a claw (physics) and the paper's tasks, as Gymnasium environments."""
+"""What hrlp knows of any environment: parameterised action spaces (:mod:`~hrlp.envs.actions`), the checks of a task
+and its spaces (:mod:`~hrlp.envs.check`), the vector-environment seam (:mod:`~hrlp.envs.vector`), and hrlp's small
+parameterised-action tasks (:mod:`~hrlp.envs.param_tasks`, registered as ``hrlp/<Name>-v0`` on import). The arm with a
+claw is a domain of its own: :mod:`hrlp.arm`."""
 
-from hrlp.envs.arm_env import ArmEnv
 from hrlp.envs.param_tasks import register_param_tasks
-from hrlp.envs.physics import BASE_OBS_DIM, JOINTS, N_JOINTS, ArmPhysics, PhysicsConfig
-from hrlp.envs.registry import TASKS, TaskSpec, make, register_all
-from hrlp.envs.tasks import GripReward, SparseSuccess, StartError, Task
 
-register_all()
 register_param_tasks()
 
-__all__ = [
-    "BASE_OBS_DIM",
-    "JOINTS",
-    "N_JOINTS",
-    "TASKS",
-    "ArmEnv",
-    "ArmPhysics",
-    "GripReward",
-    "PhysicsConfig",
-    "SparseSuccess",
-    "StartError",
-    "Task",
-    "TaskSpec",
-    "make",
-    "register_all",
-]
+__all__ = ["register_param_tasks"]

@@ -3,7 +3,7 @@
 A :class:`VectorEnv` steps ``N`` environments together: ``reset(seed) -> obs [N, obs_dim]`` and
 ``step(actions [N, act_dim]) -> VectorStep``. The sampler (:class:`hrlp.rollout.Sampler`) sees only this protocol,
 whether the ``N`` environments are ordinary Gymnasium environments stepped one by one (:class:`SerialVectorEnv`, the
-reference implementation here), hrlp's batched MuJoCo backend (:class:`hrlp.envs.batched.BatchedArmEnv`), a
+reference implementation here), hrlp's batched MuJoCo backend (:class:`hrlp.arm.batched.BatchedArmEnv`), a
 Manager's macro-action environments (:class:`hrlp.skills.macro_env.MacroVectorEnv`) or, later, a GPU backend.
 
 Actions are flat float rows: a Box action as it is, a Discrete one as one number, a parameterised
@@ -228,7 +228,7 @@ class SerialVectorEnv:
     """The reference :class:`VectorEnv`: ``N`` ordinary Gymnasium environments stepped one after another.
 
     Args:
-        envs: the environments (hrlp's :class:`~hrlp.envs.arm_env.ArmEnv` or any Gymnasium environment with a Box
+        envs: the environments (hrlp's :class:`~hrlp.arm.env.ArmEnv` or any Gymnasium environment with a Box
             observation space and a Box, Discrete or parameterised ``Tuple`` action space); they are reset and
             stepped by this object from now on.
         gamma: the discount per step (``discount = gamma``, ``tau = 1``).
@@ -324,7 +324,7 @@ class SerialVectorEnv:
         return {"envs": [env.unwrapped.get_state() for env in self.envs], "obs": self._obs.tolist()}
 
     def set_state(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`get_state` (also a :class:`~hrlp.envs.batched.BatchedArmEnv`'s, whose format is the same)."""
+        """Restore :meth:`get_state` (also a :class:`~hrlp.arm.batched.BatchedArmEnv`'s, whose format is the same)."""
         if len(state["envs"]) != self.num_envs:
             raise ValueError(
                 f"SerialVectorEnv: the saved state has {len(state['envs'])} environments, this one {self.num_envs}"

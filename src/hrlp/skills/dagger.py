@@ -33,9 +33,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from hrlp.arm.physics import N_JOINTS, ArmPhysics
+from hrlp.arm.tasks import HANDOVER_BANK
 from hrlp.atomic import atomic_path
-from hrlp.envs.physics import N_JOINTS, ArmPhysics
-from hrlp.envs.tasks import HANDOVER_BANK
 from hrlp.skills.library import SkillLibrary, default_library_root, locate_skill, search_roots
 from hrlp.skills.starts import write_start_bank
 

@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from hrlp.arm.env import ArmEnv
+from hrlp.arm.registry import make
 from hrlp.atomic import writing
 from hrlp.config import TrainConfig
-from hrlp.envs.arm_env import ArmEnv
-from hrlp.envs.registry import make
 from hrlp.skills.scripted import ScriptedGrasp, ScriptedGraspConfig
 
 __all__ = ["ImitationConfig", "collect", "fit_mean", "greedy_success", "imitate"]

@@ -32,6 +32,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from hrlp.arm.physics import BASE_OBS_DIM, N_JOINTS
+from hrlp.arm.registry import TASKS
 from hrlp.checkpoint import (
     META_FILE,
     CheckpointError,
@@ -43,8 +45,6 @@ from hrlp.checkpoint import (
     require_keys,
     save_checkpoint,
 )
-from hrlp.envs.physics import BASE_OBS_DIM, N_JOINTS
-from hrlp.envs.registry import TASKS
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.skills.core import ParamBox

@@ -29,9 +29,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from hrlp.arm.batched import BatchedArmEnv
+from hrlp.arm.physics import BASE_PARTS, N_JOINTS
 from hrlp.config import Handover, MicroAction
-from hrlp.envs.batched import BatchedArmEnv
-from hrlp.envs.physics import BASE_PARTS, N_JOINTS
 from hrlp.envs.vector import VectorStep, check_num_envs, info_arrays, info_success, physics_seconds
 from hrlp.skills.core import DirectControl, Hierarchy, MacroStep, ObsLayout, ObsView, ParamBox, decide
 from hrlp.skills.core import Skill as GenericSkill
@@ -429,7 +429,7 @@ class MacroVectorEnv:
 
 
 class BatchedMacroVectorEnv:
-    """A Manager's ``N`` environments over one :class:`~hrlp.envs.batched.BatchedArmEnv`: the macro-action logic of
+    """A Manager's ``N`` environments over one :class:`~hrlp.arm.batched.BatchedArmEnv`: the macro-action logic of
     :func:`step_macros` (:func:`decide`, batched skill inference) with the physics of every world stepped in one call
     per low-level step, the worlds whose macro-action has ended waiting (:meth:`BatchedArmEnv.advance`).
 
@@ -439,7 +439,7 @@ class BatchedMacroVectorEnv:
             hand-over, micro-action, gamma); its own environment is not stepped.
 
     Its steps are :class:`MacroVectorEnv`'s over ``N`` MacroEnvs of the same task and seeds, to within the batched
-    physics' agreement with ArmEnv's (about 1e-7, :mod:`hrlp.envs.batched`); :meth:`get_state` has the same format.
+    physics' agreement with ArmEnv's (about 1e-7, :mod:`hrlp.arm.batched`); :meth:`get_state` has the same format.
     """
 
     def __init__(self, worlds: BatchedArmEnv, layout: MacroEnv) -> None:

@@ -4,7 +4,7 @@ Section 1.1: "the Manager ... selects one of N available macro-actions and passe
 parameters to the selected macro-action". A skill's parameters enter its observation where its
 training task put them (the Reacher's goal and the Mover's target at indices 24-26, after the
 24 base numbers), so a skill trained on a task can be driven by any Manager that sets them. A skill may also read
-named observation features after its parameters (:data:`~hrlp.envs.physics.OBS_FEATURES`, e.g. the capsule's pose for
+named observation features after its parameters (:data:`~hrlp.arm.physics.OBS_FEATURES`, e.g. the capsule's pose for
 a Gripper trained with ``observe_capsule``): the environment it acts in computes them from its physics.
 """
 
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from hrlp.envs.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
+from hrlp.arm.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.skills.core import ObsView, ParamBox
@@ -25,7 +25,7 @@ from hrlp.skills.core import Skill as GenericSkill
 #: Named frames a parameter vector can be expressed in: the slice of the observation that holds the frame's origin
 #: (None for the world frame). A parameter in a body's frame is an offset from that body's position. 'hand' and
 #: 'capsule' lie in the 24 base numbers; 'target' (the task's target T) in obs[24:27] of the tasks that observe one
-#: (:attr:`hrlp.envs.tasks.Task.observes_target`: the moving tasks).
+#: (:attr:`hrlp.arm.tasks.Task.observes_target`: the moving tasks).
 FRAMES: dict[str, slice | None] = {"world": None, "hand": slice(18, 21), "capsule": slice(21, 24), "target": slice(24, 27)}
 
 

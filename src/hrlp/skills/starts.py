@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hrlp.arm import make
 from hrlp.atomic import atomic_path
-from hrlp.envs import make
 from hrlp.skills.scripted import ScriptedGrasp, ScriptedGraspConfig
 from hrlp.skills.skill import Skill
 

@@ -12,11 +12,11 @@ from typing import Any
 
 import gymnasium as gym
 
+from hrlp.arm.batched import VECTORISED, BatchedFactory, make_batched
+from hrlp.arm.registry import TASKS, ArmEnvFactory, make, probe_task
 from hrlp.config import MacroSpec, TrainConfig, auto_workers
 from hrlp.envs.actions import NormalisedParameters, is_parameterised, make_normalised
-from hrlp.envs.batched import VECTORISED, BatchedFactory, make_batched
 from hrlp.envs.check import gym_kwargs
-from hrlp.envs.registry import TASKS, ArmEnvFactory, make, probe_task
 from hrlp.envs.vector import VectorConstructor, VectorEnv
 from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv
 from hrlp.training.sources import resolve_skills
@@ -28,7 +28,7 @@ def env_factory(
     """A constructor for ``task`` (an hrlp task name/id, a Gymnasium id or ``MODULE:ID``), wrapped in a :class:`MacroEnv`
     of ``macro``'s skills (resolved once, shared, frozen: :mod:`hrlp.training.sources`) for a Manager. Raises
     ValueError, one line, before any compute, for an unknown task, an unknown or invalid argument, a missing optional
-    dependency, an unsupported space (:func:`hrlp.envs.registry.probe_task`) or a bad skill reference; for a Gymnasium id,
+    dependency, an unsupported space (:func:`hrlp.arm.registry.probe_task`) or a bad skill reference; for a Gymnasium id,
     ``episode_steps`` is its time limit, a Dict observation is flattened in its key order (for a flat policy; a
     Manager's skills read its parts by name), and a parameterised action space (flat or nested Tuple, OneOf) is
     presented in the policy's canonical form with parameters in [-1, 1] (:class:`hrlp.envs.actions.NormalisedParameters`).
@@ -101,7 +101,7 @@ class _BatchedMacroFactory(_MacroFactory, VectorConstructor):
 
 def batchable_task(task: str) -> bool:
     """Whether ``task`` (a name or id) is an hrlp arm task, whose worlds the batched backend steps together, flat or
-    under a Manager (:data:`hrlp.envs.batched.VECTORISED`)."""
+    under a Manager (:data:`hrlp.arm.batched.VECTORISED`)."""
     name = task.removeprefix("hrlp/").removesuffix("-v0")
     return name in TASKS and TASKS[name].task_type in VECTORISED
 

@@ -31,8 +31,8 @@ import mujoco
 import numpy as np
 
 from hrlp import bounds
-from hrlp.envs.physics import BASE_OBS_DIM, BASE_PARTS, N_JOINTS, OBS_FEATURES, TARGET_PART, ArmPhysics, PhysicsConfig
-from hrlp.envs.tasks import Task
+from hrlp.arm.physics import BASE_OBS_DIM, BASE_PARTS, N_JOINTS, OBS_FEATURES, TARGET_PART, ArmPhysics, PhysicsConfig
+from hrlp.arm.tasks import Task
 
 log = logging.getLogger(__name__)
 
@@ -200,7 +200,7 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
     # --- named parts, for skills (hrlp.skills.core) ----------------------------------------------
     @property
     def observation_parts(self) -> dict[str, slice]:
-        """The observation's named parts: :data:`~hrlp.envs.physics.BASE_PARTS`, and ``target`` for a task that
+        """The observation's named parts: :data:`~hrlp.arm.physics.BASE_PARTS`, and ``target`` for a task that
         observes one."""
         return {**BASE_PARTS, "target": TARGET_PART} if self.task.observes_target else dict(BASE_PARTS)
 
@@ -208,7 +208,7 @@ class ArmEnv(gym.Env[np.ndarray, np.ndarray]):
     measurable: tuple[str, ...] = tuple(OBS_FEATURES)
 
     def measure(self, name: str) -> np.ndarray:
-        """The named feature (:data:`~hrlp.envs.physics.OBS_FEATURES`) of the current state."""
+        """The named feature (:data:`~hrlp.arm.physics.OBS_FEATURES`) of the current state."""
         return self.physics.feature(name)
 
     # --- internals ----------------------------------------------------------------------------

@@ -2,7 +2,7 @@
 
 Each task is a frozen dataclass of its settings (the paper's constants are constructor
 arguments) and implements :class:`Task`. Tasks never step physics; the environment
-(``hrlp.envs.arm_env.ArmEnv``) does, and asks the task for rewards after every step.
+(``hrlp.arm.env.ArmEnv``) does, and asks the task for rewards after every step.
 
 Start distributions (docs/environments.md, "Start distributions"). The capsule lies on the
 table with its centre on a circle of radius :data:`CIRCLE_RADIUS` around the arm's base axis
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hrlp.envs.physics import BASE_AXIS_XY, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
+from hrlp.arm.physics import BASE_AXIS_XY, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
 
 #: Radius (metres) of the circle around the base axis on which capsules and palms start.
 #: Sampling 200k random arm poses puts the hand within 2 cm of the table at every angle for radii
@@ -67,7 +67,7 @@ class Task(abc.ABC):
     extra_obs_dim: int = 0
     #: Whether the observation holds the task's target T at obs[24:27] (a Manager's parameter may then be relative to it).
     observes_target: bool = False
-    #: Named observation features (:data:`hrlp.envs.physics.OBS_FEATURES`) that end the extra observations, in order: a
+    #: Named observation features (:data:`hrlp.arm.physics.OBS_FEATURES`) that end the extra observations, in order: a
     #: skill trained on the task is given them wherever it acts (a Manager's environment computes them from its physics).
     observed_features: tuple[str, ...] = ()
     #: Names of per-step quantities the environment sums over the episode and reports in ``info``.
@@ -344,7 +344,7 @@ class GripReward:
 
     ``distance`` chooses what d(H, C) measures in the first two terms: ``"centre"`` (the paper: the
     distance to the capsule's centre of mass) or ``"axis"`` (the distance to the capsule's axis segment,
-    :meth:`~hrlp.envs.physics.ArmPhysics.hand_to_capsule_axis`). A claw holds the 12 cm capsule wherever
+    :meth:`~hrlp.arm.physics.ArmPhysics.hand_to_capsule_axis`). A claw holds the 12 cm capsule wherever
     it closes along it: with the shipped Gripper, H is a median 3.2 cm from C but 1.1 cm from the axis
     while gripped, so under ``"centre"`` at tr = 0.03 a grip rarely earns the bonus and hovering over the
     centre with an open claw pays more; under ``"axis"`` gripping pays most. Definition 1 (the success
@@ -431,7 +431,7 @@ def gripper_start_bank(starts: str) -> tuple[np.ndarray, np.ndarray]:
     if starts in GRIPPER_BANKS:
         from importlib import resources
 
-        return start_bank(str(resources.files("hrlp.envs").joinpath(GRIPPER_BANKS[starts])))
+        return start_bank(str(resources.files("hrlp.arm").joinpath(GRIPPER_BANKS[starts])))
     return start_bank(starts)
 
 
@@ -665,7 +665,7 @@ def grip_starts(variant: str, held: bool = False) -> tuple[np.ndarray, np.ndarra
     from importlib import resources
 
     name = MOVER_HELD_STARTS_FILE if held else MOVER_STARTS_FILE
-    with resources.files("hrlp.envs").joinpath(name).open("rb") as f, np.load(f, allow_pickle=False) as z:
+    with resources.files("hrlp.arm").joinpath(name).open("rb") as f, np.load(f, allow_pickle=False) as z:
         return z[f"{variant}_qpos"].astype(np.float64), z[f"{variant}_qvel"].astype(np.float64)
 
 

@@ -4,7 +4,7 @@ Physics is kept apart from tasks (as in dm_control): this module owns the model,
 state and the named points of the paper (Section 4: "H is the location of the hand (precisely a
 point where the center of the mass of the capsule would be if the capsule were properly gripped
 by the hand) and C is the location of the center of mass of the capsule"), plus finger tips
-FT1/FT2 and the target T. Tasks (``hrlp.envs.tasks``) only read these measurements and place
+FT1/FT2 and the target T. Tasks (``hrlp.arm.tasks``) only read these measurements and place
 the capsule, the target and the arm through the methods below.
 """
 
@@ -45,11 +45,11 @@ BASE_PARTS: dict[str, slice] = {
     "hand": slice(2 * N_JOINTS, 2 * N_JOINTS + 3),
     "capsule": slice(2 * N_JOINTS + 3, BASE_OBS_DIM),
 }
-#: Where a task that observes a target T (:attr:`hrlp.envs.tasks.Task.observes_target`) puts it.
+#: Where a task that observes a target T (:attr:`hrlp.arm.tasks.Task.observes_target`) puts it.
 TARGET_PART = slice(BASE_OBS_DIM, BASE_OBS_DIM + 3)
 #: Named observation features beyond the 24 base numbers, by name: their width. A task may append them to its
 #: observation (``GripperTask.observe_capsule``) and a skill trained on it reads them wherever it acts, computed from
-#: the physics by :meth:`ArmPhysics.feature` (one world) or :func:`hrlp.envs.batched.feature_rows` (N worlds).
+#: the physics by :meth:`ArmPhysics.feature` (one world) or :func:`hrlp.arm.batched.feature_rows` (N worlds).
 #: ``capsule_pose``: :meth:`ArmPhysics.capsule_pose_features`; ``claw_pose``: :meth:`ArmPhysics.claw_pose_features`;
 #: ``arm_clearance``: :meth:`ArmPhysics.arm_clearance_features`.
 OBS_FEATURES: dict[str, int] = {"capsule_pose": 6, "claw_pose": 15, "arm_clearance": 5}
@@ -96,7 +96,7 @@ class PhysicsConfig:
 @functools.cache
 def model_xml() -> str:
     """The MJCF text of the arm (shipped inside the package)."""
-    return resources.files("hrlp.envs").joinpath("assets/arm_claw.xml").read_text()
+    return resources.files("hrlp.arm").joinpath("assets/arm_claw.xml").read_text()
 
 
 def load_model(config: PhysicsConfig = PhysicsConfig()) -> mujoco.MjModel:
@@ -227,7 +227,7 @@ class ArmPhysics:
 
         A start with the forearm or a finger within millimetres of the capsule is where a move of the claw pushes it
         away; the joint angles determine these distances, but through a function a small network learns poorly. The
-        batched backend reads the same numbers from distance sensors (:data:`hrlp.envs.batched.CLEARANCE_SENSORS`)."""
+        batched backend reads the same numbers from distance sensors (:data:`hrlp.arm.batched.CLEARANCE_SENSORS`)."""
         m, d, cap, pts = self.model, self.data, self._object_geom, self._nearest_points
         for i, geoms in enumerate(self._clearance_geoms):
             out[i] = min(mujoco.mj_geomDistance(m, d, g, cap, CLEARANCE_CUTOFF, pts) for g in geoms)

@@ -1,7 +1,7 @@
 """Every task of the paper as a registered Gymnasium id (``hrlp tasks`` lists them).
 
 ``gymnasium.make("hrlp/Gripper-v0", c2=4.0, tr=0.06, episode_steps=500)`` builds an
-:class:`~hrlp.envs.arm_env.ArmEnv`; keyword arguments go to the environment (``episode_steps``,
+:class:`~hrlp.arm.env.ArmEnv`; keyword arguments go to the environment (``episode_steps``,
 ``physics``, ``render_mode``, ``width``, ``height``, ``camera``) or, for the rest, to the task.
 """
 
@@ -15,17 +15,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from hrlp.envs.arm_env import ArmEnv
-from hrlp.envs.check import (
-    check_spaces,
-    default_episode_steps,
-    dependency_line,
-    gym_arguments,
-    gym_kwargs,
-    invalid_arguments_line,
-    registered_gym_id,
-)
-from hrlp.envs.tasks import (
+from hrlp.arm.env import ArmEnv
+from hrlp.arm.tasks import (
     GripperTask,
     GripReward,
     MoverTask,
@@ -34,6 +25,15 @@ from hrlp.envs.tasks import (
     ReacherTask,
     SparseSuccess,
     Task,
+)
+from hrlp.envs.check import (
+    check_spaces,
+    default_episode_steps,
+    dependency_line,
+    gym_arguments,
+    gym_kwargs,
+    invalid_arguments_line,
+    registered_gym_id,
 )
 
 NAMESPACE = "hrlp"
@@ -171,7 +171,7 @@ def register_all() -> None:
     for spec in TASKS.values():
         if spec.env_id not in gym.registry:
             gym.register(
-                id=spec.env_id, entry_point="hrlp.envs.registry:make", kwargs={"name": spec.name}, disable_env_checker=True
+                id=spec.env_id, entry_point="hrlp.arm.registry:make", kwargs={"name": spec.name}, disable_env_checker=True
             )
 
 

@@ -4,7 +4,7 @@
 :mod:`hrlp.envs.vector`) for hrlp's own arm tasks. Per step it hands the ``N`` worlds' torques to a physics backend
 in one call, then computes every world's observation (the paper's 24 numbers and the task's extras), reward terms,
 success test and tracked values with NumPy over worlds; only resets (one per episode) run per world, through the
-task's own ``reset`` on a scratch :class:`~hrlp.envs.physics.ArmPhysics`.
+task's own ``reset`` on a scratch :class:`~hrlp.arm.physics.ArmPhysics`.
 
 Backends (``backend=``), both on one ``MjModel`` of the arm with eight 3-number sensors added (hand H, finger tips
 FT1/FT2, capsule C, the capsule's and the forearm's axes, the claw's x and y axes), so that a world's measurements come
@@ -13,7 +13,7 @@ out of MuJoCo as one ``sensordata`` row instead of eight reads:
 - ``"rollout"`` (the default): MuJoCo's ``mujoco.rollout`` module steps every world ``substeps`` physics steps in C
   in one call, on ``threads`` threads (1: the calling thread). ``rollout`` starts each call from the worlds'
   ``mjSTATE_FULLPHYSICS`` states and zeroes the constraint solver's warm start (``qacc_warmstart``) at the first
-  substep of every control step, where :class:`~hrlp.envs.arm_env.ArmEnv` carries it over from the last substep;
+  substep of every control step, where :class:`~hrlp.arm.env.ArmEnv` carries it over from the last substep;
   the solver then converges to the same answer within its tolerance (1e-8) rather than to the same bits. Episodes
   agree with ArmEnv's to within 1e-7 in observations and rewards, not bit for bit (measured: at most 9e-8 over 4
   worlds x 400-600 steps of every registered arm task, random torques); truncation and success flags agreed exactly.
@@ -48,7 +48,7 @@ import mujoco
 import mujoco.rollout
 import numpy as np
 
-from hrlp.envs.physics import (
+from hrlp.arm.physics import (
     BASE_OBS_DIM,
     CAPSULE_REST_Z,
     CLEARANCE_BODIES,
@@ -59,8 +59,8 @@ from hrlp.envs.physics import (
     PhysicsConfig,
     model_xml,
 )
-from hrlp.envs.registry import TASKS, ArmEnvFactory
-from hrlp.envs.tasks import (
+from hrlp.arm.registry import TASKS, ArmEnvFactory
+from hrlp.arm.tasks import (
     GripperTask,
     GripReward,
     MoverTask,
@@ -89,8 +89,8 @@ SENSORS: tuple[tuple[str, int, int, str], ...] = (
     ("hrlp_claw_y", _S.mjSENS_FRAMEYAXIS, _O.mjOBJ_XBODY, "claw"),  # column 1 of xmat[claw]: the closing direction
 )
 #: Distance sensors added for the ``arm_clearance`` feature only (MuJoCo computes them at every substep): for each
-#: body of :data:`~hrlp.envs.physics.CLEARANCE_BODIES`, the smallest distance of its geoms to the capsule, cut off at
-#: :data:`~hrlp.envs.physics.CLEARANCE_CUTOFF` (one number each; what :meth:`ArmPhysics.arm_clearance_features` computes).
+#: body of :data:`~hrlp.arm.physics.CLEARANCE_BODIES`, the smallest distance of its geoms to the capsule, cut off at
+#: :data:`~hrlp.arm.physics.CLEARANCE_CUTOFF` (one number each; what :meth:`ArmPhysics.arm_clearance_features` computes).
 CLEARANCE_SENSORS: tuple[tuple[str, str], ...] = tuple((f"hrlp_clearance_{b}", b) for b in CLEARANCE_BODIES)
 _FULL, _INTEGRATION = _ST.mjSTATE_FULLPHYSICS, _ST.mjSTATE_INTEGRATION
 _MOCAP = _ST.mjSTATE_MOCAP_POS | _ST.mjSTATE_MOCAP_QUAT
@@ -98,7 +98,7 @@ _BAD = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL, mujo
 
 
 def measured_model(config: PhysicsConfig, clearance: bool = False) -> mujoco.MjModel:
-    """The arm's model (as :func:`hrlp.envs.physics.load_model` builds it) with :data:`SENSORS` added, and with
+    """The arm's model (as :func:`hrlp.arm.physics.load_model` builds it) with :data:`SENSORS` added, and with
     ``clearance`` the :data:`CLEARANCE_SENSORS` too.
 
     Position sensors change nothing in the dynamics: stepping it gives the same bits as the plain model
@@ -166,7 +166,7 @@ def hand_to_capsule_axis_rows(m: Measurements) -> np.ndarray:
 
 
 def claw_closure_rows(qpos: np.ndarray) -> np.ndarray:
-    """:func:`hrlp.envs.tasks.claw_closure` for ``qpos [N, 9]``: closing part of each finger plus their asymmetry, ``[N]``."""
+    """:func:`hrlp.arm.tasks.claw_closure` for ``qpos [N, 9]``: closing part of each finger plus their asymmetry, ``[N]``."""
     rc, lc = qpos[:, N_JOINTS - 2], qpos[:, N_JOINTS - 1]
     return np.maximum(rc, 0.0) + np.maximum(-lc, 0.0) + np.abs(rc + lc)
 
@@ -501,12 +501,12 @@ class BatchedArmEnv:
         Args:
             task: the task (one of :data:`VECTORISED`'s types); copied, so the caller's object keeps its own episode state.
             n: the number of worlds N.
-            episode_steps: steps before truncation, as :class:`~hrlp.envs.arm_env.ArmEnv`'s.
+            episode_steps: steps before truncation, as :class:`~hrlp.arm.env.ArmEnv`'s.
             physics: timestep, substeps and gravity.
             gamma: the discount per step (``VectorStep.discount``).
             backend: ``"rollout"`` (MuJoCo's rollout module) or ``"loop"`` (``mj_step`` per world from Python).
             threads: threads of the rollout backend (1: the calling thread); the loop backend takes 1 only.
-            features: named observation features (:data:`~hrlp.envs.physics.OBS_FEATURES`) that :meth:`features` must
+            features: named observation features (:data:`~hrlp.arm.physics.OBS_FEATURES`) that :meth:`features` must
                 give beyond the task's own (those the skills acting in these worlds read).
 
         World ``i`` behaves as an ArmEnv of the same task reset with ``seed + i`` and stepped with row ``i`` of the
@@ -687,7 +687,7 @@ class BatchedArmEnv:
         return tuple(f for f in OBS_FEATURES if f != "arm_clearance" or self._clearance)
 
     def features(self, name: str) -> np.ndarray:
-        """The named observation feature (:data:`~hrlp.envs.physics.OBS_FEATURES`) of every world's current state,
+        """The named observation feature (:data:`~hrlp.arm.physics.OBS_FEATURES`) of every world's current state,
         ``[N, width]`` (what a skill that reads it is given; :meth:`ArmPhysics.feature` for one world)."""
         return np.array(feature_rows(name, self._measure()), dtype=np.float64)
 
@@ -836,7 +836,7 @@ class BatchedArmEnv:
 
 
 def make_batched(name: str, n: int, **kwargs: Any) -> BatchedArmEnv:
-    """:class:`BatchedArmEnv` of the registered task ``name`` (``hrlp.envs.TASKS``), as ``hrlp.envs.make`` builds
+    """:class:`BatchedArmEnv` of the registered task ``name`` (``hrlp.arm.TASKS``), as ``hrlp.arm.make`` builds
     an ArmEnv: keyword arguments go to the environment (``episode_steps``, ``physics``, ``gamma``, ``backend``,
     ``threads``, ``features``) or, the rest, to the task. A one-line ValueError for an unknown task or argument."""
     if name not in TASKS:
@@ -851,7 +851,7 @@ def make_batched(name: str, n: int, **kwargs: Any) -> BatchedArmEnv:
 
 @dataclass(frozen=True, eq=False)
 class BatchedFactory(ArmEnvFactory, VectorConstructor):
-    """An :class:`~hrlp.envs.registry.ArmEnvFactory` that can also build ``n`` worlds of its task as one
+    """An :class:`~hrlp.arm.registry.ArmEnvFactory` that can also build ``n`` worlds of its task as one
     :class:`BatchedArmEnv` (:meth:`vector`). A sampler given ``n`` copies of one such factory steps them as one
     BatchedArmEnv (:func:`hrlp.rollout.build_vector_env`): the batched backend of ``TrainConfig.backend``."""
 
