@@ -20,11 +20,12 @@ import argparse
 import numpy as np
 
 from hrlp.arm import make
+from hrlp.arm.handover import arm_macro_env
 from hrlp.arm.tasks import SparseSuccess
 from hrlp.config import Handover
 from hrlp.evaluate import wilson_interval
 from hrlp.skills import load_skill
-from hrlp.skills.macro_env import MacroEnv, step_macros
+from hrlp.skills.macro_env import step_macros
 
 C, T = slice(21, 24), slice(24, 27)
 
@@ -34,7 +35,7 @@ def carry(reacher: str, gripper: str, mover: str, episodes: int, k: int, reach_c
     """Success rate, held share and mean TargetDistSum (and the untouched capsule's) over ``episodes`` seeds."""
     skills = [load_skill(name, library) for name in (reacher, gripper, mover)]
     handover = Handover(approach_height=0.0, open_torque=0.0, initiation=initiation)
-    envs = [MacroEnv(make("ReachAndMove"), skills, k=k, handover=handover) for _ in range(episodes)]
+    envs = [arm_macro_env(make("ReachAndMove"), skills, k=k, handover=handover) for _ in range(episodes)]
     for i, e in enumerate(envs):
         e.reset(seed=i)
     untouched = np.array([-np.linalg.norm(e._obs[C] - e._obs[T]) for e in envs]) * envs[0].env.unwrapped.episode_steps

@@ -21,11 +21,12 @@ import argparse
 import numpy as np
 
 from hrlp.arm import make
+from hrlp.arm.handover import arm_macro_env
 from hrlp.arm.physics import CAPSULE_REST_Z
 from hrlp.config import Handover
 from hrlp.evaluate import wilson_interval
 from hrlp.skills import load_skill
-from hrlp.skills.macro_env import MacroEnv, step_macros
+from hrlp.skills.macro_env import step_macros
 
 CHAIN = ("reacher-handover", "gripper-imitated", "mover-held")
 
@@ -36,7 +37,7 @@ def explore(episodes: int, k: int, log_std: float, policy: str, initiation: bool
     skills = [load_skill(name) for name in CHAIN]
     handover = Handover(approach_height=0.0, open_torque=0.0, target_relative=True, initiation=initiation,
                         pregrasp=pregrasp)  # fmt: skip
-    envs = [MacroEnv(make("ReachAndMove"), skills, k=k, handover=handover) for _ in range(episodes)]
+    envs = [arm_macro_env(make("ReachAndMove"), skills, k=k, handover=handover) for _ in range(episodes)]
     for i, e in enumerate(envs):
         e.reset(seed=i)
     rng = np.random.default_rng(seed)

@@ -2,7 +2,7 @@
 
 A Gripper trained with a share of its episodes starting from these states (``--task-arg starts=BANK --task-arg
 starts_fraction=F``) starts some episodes part-way along a top-down approach the scripted grasp
-(:class:`hrlp.skills.scripted.ScriptedGrasp`) took to a grip, or from the grip itself: demonstration states without
+(:class:`hrlp.arm.research.scripted.ScriptedGrasp`) took to a grip, or from the grip itself: demonstration states without
 imitating the demonstrator's actions. The episodes start from the shipped Gripper's own start set (H 0-9 cm from C,
 fingers opened 0-1 rad, the capsule anywhere on the start circle).
 
@@ -16,9 +16,9 @@ import math
 import time
 from pathlib import Path
 
+from hrlp.arm.research.scripted import ScriptedGraspConfig
+from hrlp.arm.research.starts import record_grip_starts, write_start_bank
 from hrlp.arm.tasks import HANDOVER_BANK
-from hrlp.skills.scripted import ScriptedGraspConfig
-from hrlp.skills.starts import record_grip_starts, write_start_bank
 
 
 def main() -> None:

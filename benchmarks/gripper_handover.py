@@ -2,12 +2,12 @@
 
 Collects ``--states`` hand-over states of the Manager run ``MANAGER`` to its Gripper (``--gripper``, default the Manager's
 one skill named ``gripper*``; the Manager samples
-its actions, as in training: :func:`hrlp.skills.dagger.collect_handover_states`) into four start banks under ``--out``:
+its actions, as in training: :func:`hrlp.arm.research.dagger.collect_handover_states`) into four start banks under ``--out``:
 
 - ``all``: every hand-over;
 - ``not_held``: those where the capsule is not yet held (Definition 1 false; a Manager often calls the Gripper again
   while it holds the capsule, and those episodes start as successes);
-- ``initiation_not_held``: those also inside the Gripper's initiation set (``Skill.initiation``: the hand within the
+- ``initiation_not_held``: those also inside the Gripper's initiation set (``ArmSkill.initiation``: the hand within the
   training starts' 9 cm of the capsule, the capsule resting), the states a Manager with ``Handover(initiation=True)``
   may hand over from;
 - ``switch_not_held``: those of ``not_held`` at which control passes to the Gripper (the episode's first decision or one
@@ -34,19 +34,19 @@ import numpy as np
 
 from hrlp.arm.env import ArmEnv
 from hrlp.arm.physics import ArmPhysics
+from hrlp.arm.research.dagger import collect_handover_states
+from hrlp.arm.research.starts import write_start_bank
+from hrlp.arm.skill import ArmSkill
 from hrlp.arm.tasks import HANDOVER_BANK, GripperTask, SparseSuccess
 from hrlp.evaluate import Interval, wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
-from hrlp.skills import ArmSkill as Skill
 from hrlp.skills import load_skill
-from hrlp.skills.dagger import collect_handover_states
-from hrlp.skills.starts import write_start_bank
 from hrlp.train import TrainConfig
 
 PAPER_STARTS = {"start_distance": [0.05, 0.09], "finger_opening": [0.0, 0.0]}
 
 
-def success(skill: Skill, task_kwargs: dict[str, Any], episodes: int, steps: int) -> Interval:
+def success(skill: ArmSkill, task_kwargs: dict[str, Any], episodes: int, steps: int) -> Interval:
     """Greedy success (Definition 1 at any step) of ``skill`` on ``GripperTask(**task_kwargs)``."""
     env = ArmEnv(GripperTask(**task_kwargs), episode_steps=steps)
     p, wins = env.physics, 0
@@ -64,7 +64,7 @@ def success(skill: Skill, task_kwargs: dict[str, Any], episodes: int, steps: int
     return wilson_interval(wins, episodes)
 
 
-def banks(manager: Path, gripper: Skill, states: int, out: Path) -> dict[str, Path]:
+def banks(manager: Path, gripper: ArmSkill, states: int, out: Path) -> dict[str, Path]:
     """Collect the four hand-over banks (module docstring) into ``out``; returns their paths."""
     held = SparseSuccess()
 

@@ -27,11 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from hrlp.arm.env import ArmEnv
+from hrlp.arm.research.starts import write_start_bank
 from hrlp.arm.tasks import HANDOVER_BANK, GripperTask
 from hrlp.evaluate import wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
 from hrlp.skills import load_skill
-from hrlp.skills.starts import write_start_bank
 
 
 def main() -> None:

@@ -1,7 +1,7 @@
 """Does the Gripper's reward hold it back? Retrain the shipped gripper under reward variants and measure it.
 
 Each variant continues the shipped gripper's own training run (its recipe, warm-started from its weights, as a DAgger
-round does: :func:`hrlp.skills.dagger.skill_config`), half the episodes from a hand-over start bank, with task
+round does: :func:`hrlp.arm.research.dagger.skill_config`), half the episodes from a hand-over start bank, with task
 arguments changed: ``centre`` (the recipe as it is), ``axis`` (``distance="axis"``), ``axis+push``
 (``distance="axis", push_coeff=10``). After the budget, greedy success (Definition 1) over ``--episodes`` episodes
 from the bank and from the recipe's own start set, with Wilson 95% intervals. The figures in
@@ -13,7 +13,7 @@ Each run is also evaluated from the paper's default starts (H 5-9 cm from C, the
 evaluates a finished Gripper run of any recipe instead of training one (the from-scratch Grippers of
 ``gripper-variants.json``'s ``from_scratch``, trained with ``hrlp train Gripper ...``: docs/results/README.md).
 ``--graspable D V`` adds the bank's states from which a grip can start (d(H, C) <= D metres, the capsule slower than
-V m/s: :func:`hrlp.skills.dagger.graspable`), written to ``OUT/graspable.npz``.
+V m/s: :func:`hrlp.arm.research.dagger.graspable`), written to ``OUT/graspable.npz``.
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
+from hrlp.arm.research.dagger import DaggerConfig, skill_config
 from hrlp.checkpoint import checkpoint_exists
 from hrlp.evaluate import evaluate_run
-from hrlp.skills.dagger import DaggerConfig, skill_config
 from hrlp.skills.library import locate_skill, search_roots
 from hrlp.train import train_with_progress
 
@@ -44,11 +44,11 @@ START_SETS = (
 
 
 def graspable_bank(bank: Path, out: Path, max_hand_distance: float, max_capsule_speed: float) -> Path:
-    """Write the states of ``bank`` from which a grip can start (:func:`hrlp.skills.dagger.graspable`) to ``out``."""
+    """Write the states of ``bank`` from which a grip can start (:func:`hrlp.arm.research.dagger.graspable`) to ``out``."""
     from hrlp.arm import make
+    from hrlp.arm.research.dagger import graspable
+    from hrlp.arm.research.starts import write_start_bank
     from hrlp.arm.tasks import HANDOVER_BANK, start_bank
-    from hrlp.skills.dagger import graspable
-    from hrlp.skills.starts import write_start_bank
 
     qpos, qvel = start_bank(str(bank))
     env = make("Gripper")

@@ -16,9 +16,10 @@ import argparse
 import numpy as np
 
 from hrlp.arm import make
+from hrlp.arm.handover import arm_macro_env
 from hrlp.config import Handover
 from hrlp.skills import load_skill
-from hrlp.skills.macro_env import MacroEnv, step_macros
+from hrlp.skills.macro_env import step_macros
 
 C = slice(21, 24)
 
@@ -27,7 +28,7 @@ def scripted(reacher: str, handover: Handover | None, episodes: int, k: int, rea
              library: str | None = None) -> tuple[float, float]:  # fmt: skip
     """(success rate, share of episodes whose capsule moved > 1 cm while reaching)."""
     skills = [load_skill("gripper", library), load_skill(reacher, library)]
-    envs = [MacroEnv(make("ReachAndGrip1"), skills, k=k, handover=handover) for _ in range(episodes)]
+    envs = [arm_macro_env(make("ReachAndGrip1"), skills, k=k, handover=handover) for _ in range(episodes)]
     for i, e in enumerate(envs):
         e.reset(seed=i)
     start = np.stack([e._obs[C] for e in envs])

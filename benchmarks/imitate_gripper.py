@@ -1,7 +1,7 @@
 """A Gripper imitated from the scripted grasp (behaviour cloning + DAgger), then optionally fine-tuned with TRPO.
 
-Imitates :class:`hrlp.skills.scripted.ScriptedGrasp` into the shipped Gripper recipe's run (its network, normaliser,
-task arguments and seed: the ``gripper`` run of the ``shipped-skills`` preset) with :func:`hrlp.skills.imitate.imitate`,
+Imitates :class:`hrlp.arm.research.scripted.ScriptedGrasp` into the shipped Gripper recipe's run (its network, normaliser,
+task arguments and seed: the ``gripper`` run of the ``shipped-skills`` preset) with :func:`hrlp.arm.research.imitate.imitate`,
 evaluates the student greedily from the hand-over bank, the recipe's own starts and the paper's default starts
 (``benchmarks/gripper_variants.py``'s start sets), and with ``--fine-tune-steps N`` continues the run with TRPO for N
 environment steps and evaluates it again. ``--hidden``, ``--init-log-std``, ``--backend`` and ``--task-arg KEY=VALUE``
@@ -22,9 +22,9 @@ import json
 from pathlib import Path
 
 from gripper_variants import evaluate_gripper
+from hrlp.arm.research.imitate import ImitationConfig, imitate
 from hrlp.cli import parse_task_args
 from hrlp.experiments.presets import PRESETS
-from hrlp.skills.imitate import ImitationConfig, imitate
 from hrlp.train import train
 
 

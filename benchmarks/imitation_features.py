@@ -1,9 +1,9 @@
 """What a student of the scripted grasp needs to see: behaviour cloning on the same expert data with three observations.
 
-Records ``--episodes`` episodes of the scripted grasp (:class:`hrlp.skills.scripted.ScriptedGrasp`, the moves that keep
+Records ``--episodes`` episodes of the scripted grasp (:class:`hrlp.arm.research.scripted.ScriptedGrasp`, the moves that keep
 clear) and ``--noisy-episodes`` with DART noise of std 0.3 on its executed torques from the Gripper's own start set
 (``GRIPPER_START``), every state labelled with the expert's torques. On that one data set it fits a student's mean
-action (:func:`hrlp.skills.imitate.fit_mean`, ``--epochs`` passes, the learning rate annealed) for each observation:
+action (:func:`hrlp.arm.research.imitate.fit_mean`, ``--epochs`` passes, the learning rate annealed) for each observation:
 
 - ``paper``: the 24 base numbers;
 - ``capsule_pose``: and the capsule's pose (30, as ``gripper-imitated`` sees);
@@ -28,12 +28,12 @@ import numpy as np
 import torch
 
 from hrlp.arm.registry import make
+from hrlp.arm.research.imitate import ImitationConfig, collect, fit_mean, greedy_success
+from hrlp.arm.research.scripted import ScriptedGrasp
 from hrlp.evaluate import wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
 from hrlp.policies.mlp import policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.skills.imitate import ImitationConfig, collect, fit_mean, greedy_success
-from hrlp.skills.scripted import ScriptedGrasp
 
 #: Observations compared: name -> how many of the 45 numbers (the base 24, capsule_pose's 6, claw_pose's 15) it keeps.
 OBSERVATIONS = {"paper": 24, "capsule_pose": 30, "capsule_pose+claw_pose": 45}

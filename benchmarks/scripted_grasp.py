@@ -1,4 +1,4 @@
-"""The scripted grasp expert (:class:`hrlp.skills.scripted.ScriptedGrasp`) on the Gripper's start sets.
+"""The scripted grasp expert (:class:`hrlp.arm.research.scripted.ScriptedGrasp`) on the Gripper's start sets.
 
 Runs ``--episodes`` episodes of ``--steps`` control steps (environment seeds ``--seed`` + index) from the Gripper's own
 starts (``GripperTask(**GRIPPER_START)``: H 0-9 cm from C, each finger opened 0-1 rad) and, with ``--bank`` (default:
@@ -30,10 +30,10 @@ import numpy as np
 
 from hrlp.arm.env import ArmEnv
 from hrlp.arm.physics import BASE_AXIS_XY, N_JOINTS
+from hrlp.arm.research.scripted import ScriptedGrasp, ScriptedGraspConfig
 from hrlp.arm.tasks import GripperTask
 from hrlp.evaluate import wilson_interval
 from hrlp.experiments.presets import GRIPPER_START
-from hrlp.skills.scripted import ScriptedGrasp, ScriptedGraspConfig
 
 DEFAULT_BANK = Path("/work/runs/dagger/round1/starts.npz")
 PUSHED = 0.03

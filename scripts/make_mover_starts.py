@@ -3,7 +3,7 @@
     python scripts/make_mover_starts.py [--states 2000] [--seed 0] [--out src/hrlp/arm/assets/mover_starts.npz]
     python scripts/make_mover_starts.py --held      # the "held" starts, src/hrlp/arm/assets/mover_held_starts.npz
 
-plain: the capsule within 0.2 rad of straight ahead; noised: anywhere on the circle (hrlp.skills.starts). The grip
+plain: the capsule within 0.2 rad of straight ahead; noised: anywhere on the circle (hrlp.arm.research.starts). The grip
 starts follow the shipped ``gripper``'s successful episodes from start to end; the held starts (``--held``) keep the
 states of ``gripper-imitated``'s episodes in which the capsule is in the claw.
 """
@@ -14,9 +14,9 @@ import argparse
 import math
 from pathlib import Path
 
+from hrlp.arm.research.starts import record_grip_starts, write_start_bank
 from hrlp.arm.tasks import MOVER_HELD_STARTS_FILE, MOVER_STARTS_FILE
 from hrlp.skills.library import load_skill
-from hrlp.skills.starts import record_grip_starts, write_start_bank
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

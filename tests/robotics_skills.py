@@ -77,3 +77,12 @@ goto_point_u = goto("goto_point_u", ParamBox.of([-1.4, -1.4], [1.4, 1.4], "point
 #: Push with a constant force for 20 steps (open loop: it neither aims at the goal nor stops).
 push = ScriptedSkill("push", ParamBox.of([-1.0, -1.0], [1.0, 1.0], "force (fx, fy), action units"),
                      lambda obs, p: p, k=20)  # fmt: skip
+
+#: Brake: damp the ball's velocity to a stop where it is, for 20 steps (no parameters; it never moves towards a goal).
+brake = ScriptedSkill(
+    "brake",
+    ParamBox((), (), "no parameters"),
+    lambda obs, p: np.clip(-KD * obs["observation"][:, 2:4], -1.0, 1.0),
+    reads=("observation",),
+    k=20,
+)

@@ -61,8 +61,8 @@ def test_manager_vs_flat_runs_and_reuses_finished_runs(tmp_path):
 
 def test_gripper_variants_retrains_the_shipped_gripper_and_reports_both_start_sets(tmp_path):
     from hrlp.arm import make
+    from hrlp.arm.research.starts import write_start_bank
     from hrlp.arm.tasks import HANDOVER_BANK
-    from hrlp.skills.starts import write_start_bank
 
     env = make("Gripper")
     env.reset(seed=0)
@@ -126,8 +126,9 @@ def test_gripper_handover_collects_four_banks_and_evaluates_every_start_set(tmp_
 def test_gripper_recovery_writes_the_first_states_of_the_shipped_recovery_banks(tmp_path, bank, args, skill):
     from importlib import resources
 
+    from hrlp.arm.skill_files import shipped_library_root
     from hrlp.arm.tasks import GRIPPER_BANKS, gripper_start_bank, start_bank
-    from hrlp.skills import SkillLibrary, shipped_library_root
+    from hrlp.skills import SkillLibrary
 
     out = _run("gripper_recovery.py", f"{args} --episodes 60 --out {tmp_path / 'b.npz'}", tmp_path)
     assert out.returncode == 0, out.stderr[-2000:]

@@ -291,7 +291,7 @@ def test_ray_backend_runs_the_same_grid_on_a_local_ray_instance(tmp_path):
 
 
 def test_a_run_with_an_imitation_stage_starts_from_the_student_and_is_never_confused_with_one_without(tmp_path):
-    from hrlp.skills.imitate import ImitationConfig
+    from hrlp.arm.research.imitate import ImitationConfig
 
     cfg = TrainConfig(task="Gripper", batch_steps=60, num_envs=2, episode_steps=15, workers=1)
     imitation = ImitationConfig(expert_episodes=2, dagger_rounds=0, epochs=1, minibatch=16)

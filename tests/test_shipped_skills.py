@@ -2,9 +2,10 @@
 
 from typer.testing import CliRunner
 
+from hrlp.arm.skill_files import shipped_library_root
 from hrlp.cli import app
 from hrlp.experiments.presets import PRESETS
-from hrlp.skills import SkillLibrary, shipped_library_root
+from hrlp.skills import SkillLibrary
 from hrlp.train import TrainConfig
 
 

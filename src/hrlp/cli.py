@@ -1076,13 +1076,18 @@ def _task_args_accessor() -> tuple[Any, Any]:
     return show, lambda c, v, p: dataclasses.replace(c, task_kwargs=parse_task_args(v))
 
 
-def _setting_accessor(setting: _Setting) -> tuple[Any, Any]:
-    from hrlp.training.environments import resolve_config  # torch-free, but it builds the task registry
+def _resolve_config(cfg: TrainConfig) -> TrainConfig:
+    """:func:`hrlp.training.environments.resolve_config`, imported when a resume compares settings (not for --help)."""
+    from hrlp.training.environments import resolve_config
 
+    return resolve_config(cfg)
+
+
+def _setting_accessor(setting: _Setting) -> tuple[Any, Any]:
     if (setting.config, setting.field) == (TrainConfig, "workers"):  # 0: the count this machine gives, compared as such
-        return lambda c: c.workers, lambda c, v, p: resolve_config(dataclasses.replace(c, workers=v))
+        return lambda c: c.workers, lambda c, v, p: _resolve_config(dataclasses.replace(c, workers=v))
     if (setting.config, setting.field) == (TrainConfig, "backend"):  # auto: the run's choice for its task
-        return lambda c: c.backend, lambda c, v, p: resolve_config(dataclasses.replace(c, backend=v))
+        return lambda c: c.backend, lambda c, v, p: _resolve_config(dataclasses.replace(c, backend=v))
     if setting.config is TrainConfig:
         return _replace_top(setting.field)
     return _replace_nested(_NESTED[setting.config], setting.field)
@@ -1160,7 +1165,8 @@ def skills_list(library: _LIBRARY = None) -> None:
     A broken entry is listed too, marked 'broken', with its one-line reason on stderr; the others are listed as usual."""
     from rich.markup import escape
 
-    from hrlp.skills import SkillLibrary, shipped_library_root
+    from hrlp.arm.skill_files import shipped_library_root
+    from hrlp.skills import SkillLibrary
 
     lib, shipped = SkillLibrary(library), SkillLibrary(shipped_library_root())
     if not lib.root.is_dir():
@@ -1195,7 +1201,8 @@ def skills_show(name: Annotated[str, typer.Argument(help="Skill name.")], librar
 
     from rich.markup import escape
 
-    from hrlp.skills import SkillLibrary, locate_skill, shipped_library_root
+    from hrlp.arm.skill_files import shipped_library_root
+    from hrlp.skills import SkillLibrary, locate_skill
 
     try:  # the library first, then the shipped skills; a name with a path in it is refused, never followed
         m = locate_skill(name, [SkillLibrary(library).root, shipped_library_root()]).manifest(name)
@@ -1238,8 +1245,10 @@ def skills_add(
     library: _LIBRARY = None,
 ) -> None:
     """Turn a finished training run into a named, frozen skill in the library (docs/skills.md)."""
+    from hrlp.arm.skill import PARAM_SPECS
+    from hrlp.arm.skill_files import add_run
     from hrlp.checkpoint import CheckpointError, read_run_checkpoint
-    from hrlp.skills import PARAM_SPECS, SkillLibrary
+    from hrlp.skills import SkillLibrary
 
     try:
         task = read_run_checkpoint(run_dir / "checkpoint")[2].task
@@ -1249,7 +1258,7 @@ def skills_add(
                                                                  ("done_part", done_part), ("done_within", done_within))
                          if v is not None]:  # fmt: skip
                 raise ValueError(f"{', '.join(given)}: an arm skill's parameters are its task's ({task}); leave them out")
-            path = lib.add(run_dir, name, k=15 if k is None else k, overwrite=overwrite)
+            path = add_run(lib, run_dir, name, k=15 if k is None else k, overwrite=overwrite)
         else:
             from hrlp.training.loading import policy_skill_files
 
@@ -1292,6 +1301,7 @@ def skills_build(
     """Train the shipped skills from their recipes (the 'shipped-skills' preset) and add them to LIBRARY."""
     from dataclasses import replace
 
+    from hrlp.arm.skill_files import add_run
     from hrlp.checkpoint import CheckpointError
     from hrlp.experiments.presets import PRESETS
     from hrlp.experiments.runner import plan
@@ -1313,7 +1323,7 @@ def skills_build(
             preset = preset.with_budget(budget)
         for job, run in zip(plan(preset, out), preset.runs, strict=True):
             assert run.skill is not None
-            lib.add(job.run_dir, run.skill[0], k=run.skill[1], overwrite=overwrite)
+            add_run(lib, job.run_dir, run.skill[0], k=run.skill[1], overwrite=overwrite)
             console.print(f"skill {run.skill[0]!r} (k = {run.skill[1]}) from {job.run_dir} added to {library}")
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
@@ -1368,7 +1378,7 @@ def dagger(
 ) -> None:
     """One DAgger round (Appendix C): collect the states where MANAGER_RUN calls SKILL, retrain the skill from them
     (warm-started), freeze it under a new name with its lineage, retrain the Manager with it, compare old and new."""
-    from hrlp.skills.dagger import DaggerConfig, run_round
+    from hrlp.arm.research.dagger import DaggerConfig, run_round
 
     cfg = DaggerConfig(str(manager_run), skill, name or f"{skill}-dagger", None if library is None else str(library),
                        states, skill_steps, starts_fraction, manager_steps, workers, episodes, seed, max_hand_distance,

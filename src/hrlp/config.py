@@ -202,7 +202,7 @@ class Handover:
     """
 
     relative: bool = True
-    """The Manager's goal is an offset from the capsule's centre in :data:`~hrlp.skills.skill.HANDOVER_POINT`'s box
+    """The Manager's goal is an offset from the capsule's centre in :data:`~hrlp.arm.skill.HANDOVER_POINT`'s box
     (5 cm aside, 0-20 cm above), taken at the macro-action's start, instead of a point of the whole workspace."""
     approach_height: float = 0.11
     """Metres the goal is raised until the hand is above it (within ``approach_radius`` horizontally), so the hand
@@ -215,7 +215,7 @@ class Handover:
     skill's own finger torques."""
     target_relative: bool = False
     """A moving skill's (a Mover's) target is an offset from the task's own target T in
-    :data:`~hrlp.skills.skill.HANDOVER_TARGET`'s box (10 cm each way), instead of a point of the whole workspace: the
+    :data:`~hrlp.arm.skill.HANDOVER_TARGET`'s box (10 cm each way), instead of a point of the whole workspace: the
     Manager's first targets fall near T. Only on tasks that observe a target (reach-and-move)."""
     initiation: bool = False
     """Each skill starts only from its initiation set (:attr:`Skill.initiation`: the states like those it was trained
@@ -228,7 +228,7 @@ class Handover:
     skill is available, and the micro-action always does."""
 
     pregrasp: bool = False
-    """A point skill's goal is an offset in :data:`~hrlp.skills.skill.HANDOVER_PREGRASP`'s box (3 cm aside, 0-8 cm above
+    """A point skill's goal is an offset in :data:`~hrlp.arm.skill.HANDOVER_PREGRASP`'s box (3 cm aside, 0-8 cm above
     the capsule's centre) instead of HANDOVER_POINT's (5 cm, 0-20 cm): the Manager's first goals, the box's centre 4 cm
     above C, leave the palm where a Gripper starts. Only with ``relative``."""
 

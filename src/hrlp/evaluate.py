@@ -18,7 +18,7 @@ from scipy import stats as sstats
 from hrlp.envs.vector import NO_SUCCESS_TEST, VectorStep
 from hrlp.rollout import Episode
 from hrlp.skills.core import ObsLayout
-from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv
+from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.loading import load_trained
 
 
@@ -170,7 +170,7 @@ def evaluate_run(run_dir: Path, episodes: int = 20, seed: int = 10_000, determin
     n = min(episodes, EVAL_ENVS)
     gap = _capsule_target_spans(trained.make_env(**(task_kwargs or {})))
     env = trained.vector_env(n, **(task_kwargs or {}))
-    names = env.names if isinstance(env, MacroVectorEnv | BatchedMacroVectorEnv) else None
+    names = getattr(env, "names", None)  # a Manager's environments name their macro-actions
     gen = torch.Generator().manual_seed(seed)
     done_eps: list[Episode] = []
     usage: Counter[str] = Counter()

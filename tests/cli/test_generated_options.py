@@ -282,10 +282,11 @@ def test_init_from_starts_a_flat_run_from_a_skill_and_resume_keeps_it(tmp_path):
     first = next(k for k in skill if k.endswith("weight"))
     assert float((tensors[f"policy.{first}"] - skill[first]).abs().max()) < 0.05
     # Frozen, it records the skill it started from, with the hash that skill had.
+    from hrlp.arm.skill_files import add_run
     from hrlp.skills.library import SkillLibrary
 
     lib = SkillLibrary(tmp_path / "lib")
-    lib.add(run, "gripper-more")
+    add_run(lib, run, "gripper-more")
     assert lib.manifest("gripper-more")["lineage"] == {
         "parent": "gripper",
         "parent_sha256": load_skill("gripper").content_hash,
@@ -317,7 +318,7 @@ def test_init_from_that_cannot_start_the_run_is_one_line_before_anything_is_writ
 def test_a_run_started_from_a_skill_directory_resumes_after_the_skill_is_gone(tmp_path):
     import shutil
 
-    from hrlp.skills.library import shipped_library_root
+    from hrlp.arm.skill_files import shipped_library_root
 
     parent = tmp_path / "mine" / "gripper"
     shutil.copytree(shipped_library_root() / "gripper", parent)

@@ -5,9 +5,8 @@ import pytest
 
 from hrlp.arm import make
 from hrlp.arm.physics import CAPSULE_RADIUS
+from hrlp.arm.skill import PARAM_SPECS, POINT_TASKS
 from hrlp.arm.tasks import HANDOVER_GOAL_HIGH, HANDOVER_GOAL_LOW, claw_closure
-from hrlp.skills import PARAM_SPECS
-from hrlp.skills.skill import POINT_TASKS
 
 
 def test_goals_are_pre_grasp_points_in_the_handover_box_never_inside_the_capsule():

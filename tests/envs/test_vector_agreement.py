@@ -26,13 +26,14 @@ import torch
 from hrlp.algos.kernels import discounted_returns, gae
 from hrlp.arm import make
 from hrlp.arm.batched import make_batched
+from hrlp.arm.manager import BatchedMacroVectorEnv
 from hrlp.config import MicroAction
 from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorEnv, VectorStep, action_decoder
 from hrlp.policies.mlp import policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import Batch, Episode, Sampler, vector_env
 from hrlp.skills.library import load_skill
-from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv
+from hrlp.skills.macro_env import MacroEnv, MacroVectorEnv
 
 TASK, N, EPISODE = "ReachAndGrip2", 3, 12
 LOOSE = {"tr1": 0.3, "tr2": 0.06}  # success within reach of random torques, so the success flags are compared both ways

@@ -141,7 +141,7 @@ def build_bad_skill_files(root: Path) -> BadSkillFiles:
     import safetensors.torch
     import torch
 
-    from hrlp.skills import shipped_library_root
+    from hrlp.arm.skill_files import shipped_library_root
 
     root = Path(root)
     library, outside, markers = root / "library", root / "outside", root / "markers"

@@ -15,9 +15,10 @@ import torch
 from bad_skill_files import GOOD, MODES, BadSkillFiles, Outcome, build_bad_skill_files, code_executed, run_bad_skill_files
 from typer.testing import CliRunner
 
+from hrlp.arm.skill_files import add_run, shipped_library_root
 from hrlp.checkpoint import META_FILE, WEIGHTS_FILE, CheckpointError, ReadLimits, load_checkpoint, save_checkpoint
 from hrlp.cli import app
-from hrlp.skills import SkillLibrary, load_skill, shipped_library_root
+from hrlp.skills import SkillLibrary, load_skill
 from hrlp.train import TrainConfig, load_policy, train
 
 #: Kinds also loaded the way a Manager loads its skills (``hrlp train-manager --skills``); every kind goes through
@@ -210,7 +211,7 @@ def test_a_checkpoints_meta_is_checked_key_by_key_and_its_hash_covers_the_weight
         lines = [line for line in r.output.splitlines() if line.strip()]
         assert len(lines) == 1 and lines[0].startswith("error: ") and META_FILE in lines[0], r.output
         with pytest.raises(CheckpointError, match=problem):
-            SkillLibrary(tmp_path / "lib").add(run, f"s{i}")
+            add_run(SkillLibrary(tmp_path / "lib"), run, f"s{i}")
     run = tmp_path / "flipped"  # the weights are what the hash covers: one flipped byte is caught
     shutil.copytree(tiny_run, run)
     data = bytearray((run / "checkpoint" / WEIGHTS_FILE).read_bytes())

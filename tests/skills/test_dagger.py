@@ -7,12 +7,12 @@ import pytest
 from typer.testing import CliRunner
 
 from hrlp.arm import make
+from hrlp.arm.research.dagger import DaggerConfig, collect_handover_states, graspable, run_round
+from hrlp.arm.research.starts import write_start_bank
 from hrlp.arm.tasks import start_bank
 from hrlp.cli import app
 from hrlp.config import Handover, MacroSpec
 from hrlp.skills import SkillLibrary, load_skill
-from hrlp.skills.dagger import DaggerConfig, collect_handover_states, graspable, run_round
-from hrlp.skills.starts import write_start_bank
 from hrlp.train import TrainConfig, Trainer, load_trained, train
 
 

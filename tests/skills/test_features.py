@@ -15,9 +15,11 @@ import pytest
 
 from hrlp.arm import make
 from hrlp.arm.batched import make_batched
+from hrlp.arm.manager import BatchedMacroVectorEnv
+from hrlp.arm.skill_files import add_run
 from hrlp.config import MacroSpec
 from hrlp.skills import SkillLibrary
-from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv, MacroVectorEnv
+from hrlp.skills.macro_env import MacroEnv, MacroVectorEnv
 from hrlp.train import TrainConfig, load_policy, train
 
 SEEING = {"observe_capsule": True, "observe_claw": True, "observe_clearance": True}
@@ -32,7 +34,7 @@ def seeing(tmp_path_factory):
     run = tmp_path_factory.mktemp("seeing_run")
     list(train(TrainConfig(task="Gripper", steps=200, batch_steps=200, num_envs=4, episode_steps=25, task_kwargs=SEEING), run))
     lib = SkillLibrary(tmp_path_factory.mktemp("seeing_lib"))
-    lib.add(run, "seeing", k=K)
+    add_run(lib, run, "seeing", k=K)
     return run, lib
 
 

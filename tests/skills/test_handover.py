@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from hrlp.arm import make
+from hrlp.arm.handover import arm_macro_env
+from hrlp.arm.skill import HANDOVER_POINT, HANDOVER_TARGET, PARAM_SPECS, ParamSpec
 from hrlp.checkpoint import CheckpointError
 from hrlp.config import Handover, MacroSpec, MicroAction
-from hrlp.skills import PARAM_SPECS, ParamSpec, SkillLibrary, load_skill
+from hrlp.skills import SkillLibrary, load_skill
 from hrlp.skills.macro_env import MacroEnv, step_macros
-from hrlp.skills.skill import HANDOVER_POINT, HANDOVER_TARGET
 
 H, C = slice(18, 21), slice(21, 24)
 
@@ -28,10 +29,10 @@ def _twin(seed: int):
 
 
 def test_relative_goals_are_offsets_from_the_capsule_at_the_macro_start(shipped):
-    macro = MacroEnv(make("ReachAndGrip2", episode_steps=60), shipped, k=6,
+    macro = arm_macro_env(make("ReachAndGrip2", episode_steps=60), shipped, k=6,
                      handover=Handover(approach_height=0.0, open_torque=0.0))  # fmt: skip
     obs, _ = macro.reset(seed=4)
-    assert macro.param_specs[1] == HANDOVER_POINT and macro.param_specs[0] == shipped[0].param
+    assert macro.param_boxes[1] == HANDOVER_POINT.box() and macro.param_boxes[0] == shipped[0].param.box()
     offset = np.array([0.02, -0.01, 0.05])
     block = (offset - (np.array(HANDOVER_POINT.low) + HANDOVER_POINT.high) / 2) / (
         (np.array(HANDOVER_POINT.high) - HANDOVER_POINT.low) / 2
@@ -47,7 +48,7 @@ def test_relative_goals_are_offsets_from_the_capsule_at_the_macro_start(shipped)
 
 def test_the_goal_is_raised_until_the_hand_is_above_it_and_the_claw_is_held_open(shipped):
     h = Handover(relative=False, approach_height=0.11, approach_radius=0.02, open_torque=0.3)
-    macro = MacroEnv(make("ReachAndGrip2", episode_steps=60), shipped, k=5, handover=h)
+    macro = arm_macro_env(make("ReachAndGrip2", episode_steps=60), shipped, k=5, handover=h)
     obs, _ = macro.reset(seed=1)
     far = obs[C] + (0.0, 0.0, 0.03)  # the hand starts on the palm circle, far from above the capsule
     assert np.linalg.norm(obs[H][:2] - far[:2]) > 0.02
@@ -71,7 +72,7 @@ def test_the_goal_is_raised_until_the_hand_is_above_it_and_the_claw_is_held_open
 
 def test_handover_leaves_other_macro_actions_alone(shipped):
     h = Handover()
-    a = MacroEnv(make("ReachAndGrip1", episode_steps=40), shipped, k=5, micro=MicroAction(), handover=h)
+    a = arm_macro_env(make("ReachAndGrip1", episode_steps=40), shipped, k=5, micro=MicroAction(), handover=h)
     b = MacroEnv(make("ReachAndGrip1", episode_steps=40), shipped, k=5, micro=MicroAction())
     for env in (a, b):
         env.reset(seed=2)
@@ -82,7 +83,7 @@ def test_handover_leaves_other_macro_actions_alone(shipped):
 
 def _scripted_success(skills, handover, episodes=48, reach_calls=8):
     """Reach for 4 cm above the capsule for ``reach_calls`` macro-actions, then grip: the plan a Manager has to find."""
-    envs = [MacroEnv(make("ReachAndGrip1"), skills, k=10, handover=handover) for _ in range(episodes)]
+    envs = [arm_macro_env(make("ReachAndGrip1"), skills, k=10, handover=handover) for _ in range(episodes)]
     for i, e in enumerate(envs):
         e.reset(seed=i)
     success, done = np.zeros(episodes, dtype=bool), np.zeros(episodes, dtype=bool)
@@ -97,10 +98,10 @@ def _scripted_success(skills, handover, episodes=48, reach_calls=8):
 def test_mover_targets_relative_to_the_tasks_target_reach_the_mover_as_that_point():
     skills = [load_skill("reacher-handover"), load_skill("gripper-imitated"), load_skill("mover-held")]
     handover = Handover(approach_height=0.0, open_torque=0.0, target_relative=True)
-    macro = MacroEnv(make("ReachAndMove", episode_steps=45), skills, k=15, handover=handover)
+    macro = arm_macro_env(make("ReachAndMove", episode_steps=45), skills, k=15, handover=handover)
     obs, _ = macro.reset(seed=2)
-    assert macro.param_specs[2] == HANDOVER_TARGET and macro.param_specs[0] == HANDOVER_POINT
-    assert macro.param_specs[1] == skills[1].param  # the Gripper has no parameters
+    assert macro.param_boxes[2] == HANDOVER_TARGET.box() and macro.param_boxes[0] == HANDOVER_POINT.box()
+    assert macro.param_boxes[1] == skills[1].param.box()  # the Gripper has no parameters
     offset = np.array([0.05, -0.02, 0.1])  # the box's corner in z: block +1
     block = offset / 0.1
     assert macro.parameters(2, block) == pytest.approx(obs[24:27] + offset)
@@ -114,8 +115,8 @@ def test_mover_targets_relative_to_the_tasks_target_reach_the_mover_as_that_poin
     np.testing.assert_allclose(macro.env.physics.qpos, low.physics.qpos)
     # A task without a target has nothing to be relative to: refused when the Manager's environment is made.
     with pytest.raises(ValueError, match="needs a task that observes a target"):
-        MacroEnv(make("ReachAndGrip2"), skills, k=15, handover=handover)
-    assert MacroEnv(make("ReachAndGrip2"), skills, k=15, handover=Handover()).param_specs[2] == skills[2].param
+        arm_macro_env(make("ReachAndGrip2"), skills, k=15, handover=handover)
+    assert arm_macro_env(make("ReachAndGrip2"), skills, k=15, handover=Handover()).param_boxes[2] == skills[2].param.box()
 
 
 def test_the_shipped_reacher_hands_over_to_the_gripper_only_through_the_handover_interface(shipped):
@@ -133,7 +134,7 @@ def test_parameters_are_declared_in_code_and_manifests_cannot_redefine_them(tmp_
     lib = SkillLibrary(tmp_path)
     import shutil
 
-    from hrlp.skills.library import shipped_library_root
+    from hrlp.arm.skill_files import shipped_library_root
 
     shutil.copytree(shipped_library_root() / "reacher", tmp_path / "r")
     meta_path = tmp_path / "r" / "meta.json"
@@ -245,7 +246,7 @@ def _base(hand, capsule):
 
 def test_initiation_sets_hold_where_their_skills_were_trained_to_start():
     from hrlp.arm.physics import CAPSULE_REST_Z
-    from hrlp.skills.skill import Initiation
+    from hrlp.arm.skill import Initiation
 
     rest, up = CAPSULE_REST_Z, CAPSULE_REST_Z + 0.02
     capsule = np.array([[0.0, 0.0, rest], [0.0, 0.0, rest], [0.0, 0.0, up], [0.0, 0.0, rest + 0.005]])
@@ -263,7 +264,7 @@ def test_initiation_sets_hold_where_their_skills_were_trained_to_start():
 
 
 def test_initiation_sets_are_declared_from_the_training_task_and_read_from_shipped_manifests():
-    from hrlp.skills.skill import Initiation, initiation_for
+    from hrlp.arm.skill import Initiation, initiation_for
 
     assert initiation_for("ReacherHandover") == Initiation(capsule="resting")
     assert initiation_for("Gripper") == Initiation(hand_within=0.09)
@@ -281,7 +282,7 @@ def test_initiation_sets_are_declared_from_the_training_task_and_read_from_shipp
 def test_a_damaged_manifests_task_settings_are_named_when_the_skill_is_read(tmp_path):
     import shutil
 
-    from hrlp.skills.library import shipped_library_root
+    from hrlp.arm.skill_files import shipped_library_root
 
     shutil.copytree(shipped_library_root() / "gripper-imitated", tmp_path / "g")
     meta_path = tmp_path / "g" / "meta.json"
@@ -301,7 +302,15 @@ _NEAR = np.array([0.0, 0.0, -0.6])  # the Reacher's block for C + (0, 0, 4 cm)
 
 
 def test_a_choice_outside_its_set_runs_the_nearest_skill_before_it_whose_set_holds():
-    from hrlp.skills.macro_env import initiated
+    import gymnasium as gym
+
+    from hrlp.arm.physics import BASE_PARTS
+    from hrlp.skills.core import ObsLayout, ObsView
+    from hrlp.skills.core import initiated as chosen
+
+    def initiated(skills, obs, choice, ran=None):  # the arm's base parts, read by name
+        layout = ObsLayout.of_space(gym.spaces.Box(-np.inf, np.inf, (obs.shape[1],)), BASE_PARTS)
+        return chosen(skills, ObsView(obs, layout, np.arange(len(obs))), choice, ran)
 
     skills = _carry_skills()  # resting; the hand within 9 cm; lifted
     c0 = np.array([0.0, 0.0, 0.025])
@@ -322,8 +331,8 @@ def test_a_choice_outside_its_set_runs_the_nearest_skill_before_it_whose_set_hol
 
 def test_a_skill_chosen_outside_its_initiation_set_runs_another_with_its_own_block():
     skills = _carry_skills()
-    free = MacroEnv(make("ReachAndMove", episode_steps=90), skills, k=15, handover=_INIT)
-    plain = MacroEnv(make("ReachAndMove", episode_steps=90), skills, k=15,
+    free = arm_macro_env(make("ReachAndMove", episode_steps=90), skills, k=15, handover=_INIT)
+    plain = arm_macro_env(make("ReachAndMove", episode_steps=90), skills, k=15,
                      handover=Handover(approach_height=0.0, open_torque=0.0, target_relative=True))  # fmt: skip
     obs, _ = free.reset(seed=3)
     plain.reset(seed=3)
@@ -343,7 +352,7 @@ def test_a_skill_chosen_outside_its_initiation_set_runs_another_with_its_own_blo
 
 
 def test_a_chosen_skill_goes_on_where_it_left_the_arm_and_the_mover_starts_once_the_capsule_is_lifted():
-    macro = MacroEnv(make("ReachAndMove", episode_steps=150), _carry_skills(), k=15, handover=_INIT)
+    macro = arm_macro_env(make("ReachAndMove", episode_steps=150), _carry_skills(), k=15, handover=_INIT)
     obs, _ = macro.reset(seed=0)
     ran, hand = [], []
     for t in range(10):
@@ -366,10 +375,11 @@ def test_a_chosen_skill_goes_on_where_it_left_the_arm_and_the_mover_starts_once_
 @pytest.mark.parametrize("backend", ["loop", "rollout"])
 def test_initiation_sets_run_the_same_macro_actions_in_the_batched_worlds(backend):
     from hrlp.arm.batched import make_batched
-    from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroVectorEnv
+    from hrlp.arm.manager import BatchedMacroVectorEnv
+    from hrlp.skills.macro_env import MacroVectorEnv
 
     n, skills = 4, _carry_skills()
-    build = lambda: MacroEnv(make("ReachAndMove", episode_steps=60), skills, k=15, handover=_INIT)  # noqa: E731
+    build = lambda: arm_macro_env(make("ReachAndMove", episode_steps=60), skills, k=15, handover=_INIT)  # noqa: E731
     serial = MacroVectorEnv([build() for _ in range(n)])
     batched = BatchedMacroVectorEnv(make_batched("ReachAndMove", n, episode_steps=60, backend=backend), build())
     obs = serial.reset(seed=5)
@@ -404,11 +414,13 @@ def test_handover_initiation_round_trips_and_older_configs_read_as_off():
 
 
 def test_pregrasp_goals_centre_4_cm_above_the_capsule_within_the_grippers_reach():
-    from hrlp.skills.skill import HANDOVER_PREGRASP
+    from hrlp.arm.skill import HANDOVER_PREGRASP
 
-    macro = MacroEnv(make("ReachAndMove", episode_steps=150), _carry_skills(), k=15, handover=replace(_INIT, pregrasp=True))
+    macro = arm_macro_env(
+        make("ReachAndMove", episode_steps=150), _carry_skills(), k=15, handover=replace(_INIT, pregrasp=True)
+    )
     obs, _ = macro.reset(seed=4)
-    assert macro.param_specs[0] == HANDOVER_PREGRASP
+    assert macro.param_boxes[0] == HANDOVER_PREGRASP.box()
     assert macro.parameters(0, np.zeros(3)) == pytest.approx(obs[C] + (0, 0, 0.04))  # the Manager's first mean goal
     assert macro.parameters(0, np.ones(3)) == pytest.approx(obs[C] + (0.03, 0.03, 0.08))
     for _ in range(3):  # from its first mean goal the Reacher leaves the palm where the Gripper starts

@@ -7,6 +7,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from hrlp.arm import make
+from hrlp.arm.skill_files import add_run
 from hrlp.config import MicroAction
 from hrlp.skills import SkillLibrary
 from hrlp.skills.macro_env import MacroEnv
@@ -20,7 +21,7 @@ def skills(tmp_path_factory):
     for task in ("Reacher", "Gripper"):
         run = root / task
         list(train(TrainConfig(task=task, steps=100, batch_steps=100, num_envs=2, episode_steps=10), run))
-        lib.add(run, task.lower(), k=5)
+        add_run(lib, run, task.lower(), k=5)
     return [lib.load("gripper"), lib.load("reacher")]
 
 

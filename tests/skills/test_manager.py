@@ -9,6 +9,7 @@ import torch
 from typer.testing import CliRunner
 
 from hrlp.arm import make
+from hrlp.arm.skill_files import add_run
 from hrlp.cli import app
 from hrlp.config import MacroSpec, MicroAction
 from hrlp.evaluate import evaluate_run
@@ -25,7 +26,7 @@ def library(tmp_path_factory):
     lib = SkillLibrary(root / "skills")
     for task in ("Reacher", "Gripper"):
         list(train(TrainConfig(task=task, steps=200, batch_steps=200, num_envs=4, episode_steps=25), root / task))
-        lib.add(root / task, task.lower(), k=5)
+        add_run(lib, root / task, task.lower(), k=5)
     return lib
 
 
@@ -81,7 +82,7 @@ def test_a_changed_skill_is_refused_on_resume(library, tmp_path):
         (lib2.root / n).mkdir(parents=True)
         for f in ("weights.safetensors", "meta.json"):
             (lib2.root / n / f).write_bytes((library.root / n / f).read_bytes())
-    lib2.add(tmp_path / "r", "reacher", k=5)
+    add_run(lib2, tmp_path / "r", "reacher", k=5)
     cfg = _cfg(library, steps=100)
     moved = TrainConfig.from_json({**cfg.to_json(), "macro": {**cfg.macro.to_json(), "library": str(lib2.root)}})
     trainer = Trainer(moved)

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from hrlp.arm.env import ArmEnv
+from hrlp.arm.research.scripted import ScriptedGrasp
 from hrlp.arm.tasks import GripperTask
 from hrlp.experiments.presets import GRIPPER_START
-from hrlp.skills.scripted import ScriptedGrasp
 
 
 def _env() -> ArmEnv:
@@ -76,10 +76,10 @@ def test_action_shape_and_range_on_own_starts_and_odd_states():
 def test_imitation_writes_a_run_that_eval_reads_and_trpo_fine_tunes(tmp_path):
     import dataclasses
 
+    from hrlp.arm.research.imitate import ImitationConfig, imitate
     from hrlp.config import TrainConfig
     from hrlp.evaluate import evaluate_run
     from hrlp.experiments.presets import GRIPPER_START
-    from hrlp.skills.imitate import ImitationConfig, imitate
     from hrlp.train import load_trained, resolve_config, train
 
     cfg = TrainConfig(task="Gripper", steps=200, batch_steps=100, num_envs=2, episode_steps=20, init_log_std=-1.0,
@@ -112,7 +112,7 @@ def _gripper_env(steps: int = 15):
 
 
 def test_collect_noise_moves_the_states_but_not_the_labels_and_is_reproducible():
-    from hrlp.skills.imitate import collect
+    from hrlp.arm.research.imitate import collect
 
     env = _gripper_env()
     expert = ScriptedGrasp(env.physics)
@@ -130,7 +130,7 @@ def test_collect_noise_moves_the_states_but_not_the_labels_and_is_reproducible()
 
 
 def test_collect_with_the_expert_always_mixed_in_is_the_expert_rollout():
-    from hrlp.skills.imitate import collect
+    from hrlp.arm.research.imitate import collect
 
     env = _gripper_env()
     expert = ScriptedGrasp(env.physics)
@@ -144,9 +144,9 @@ def test_collect_with_the_expert_always_mixed_in_is_the_expert_rollout():
 
 
 def test_imitation_keeps_the_best_evaluated_round(tmp_path):
+    from hrlp.arm.research.imitate import ImitationConfig, greedy_success, imitate
     from hrlp.config import TrainConfig
     from hrlp.experiments.presets import GRIPPER_START
-    from hrlp.skills.imitate import ImitationConfig, greedy_success, imitate
     from hrlp.train import load_trained
 
     cfg = TrainConfig(task="Gripper", steps=200, batch_steps=100, num_envs=2, episode_steps=20, task_kwargs=GRIPPER_START)
@@ -187,9 +187,9 @@ def test_a_capsule_at_rest_gets_one_plan_whatever_the_last_digits_of_its_height(
 
 
 def test_the_first_version_stays_reachable_and_is_what_gripper_imitated_was_imitated_from():
+    from hrlp.arm.research.imitate import ImitationConfig
+    from hrlp.arm.research.scripted import ScriptedGraspConfig
     from hrlp.experiments.presets import IMITATED_GRIPPER
-    from hrlp.skills.imitate import ImitationConfig
-    from hrlp.skills.scripted import ScriptedGraspConfig
 
     def grips(cfg: ScriptedGraspConfig, seed: int) -> bool:
         env = _env()
@@ -214,7 +214,7 @@ def test_the_first_version_stays_reachable_and_is_what_gripper_imitated_was_imit
 # the default expert's first moves push the capsule away; with the escape the hand goes up first and then grips.
 @pytest.mark.parametrize("seed", [10_042, 10_085])
 def test_the_escape_takes_the_claw_out_of_a_tight_start_and_grips(seed):
-    from hrlp.skills.scripted import ScriptedGraspConfig
+    from hrlp.arm.research.scripted import ScriptedGraspConfig
 
     def episode(cfg: ScriptedGraspConfig) -> tuple[bool, float, float]:
         env = _env()
@@ -250,9 +250,9 @@ def test_arm_clearance_is_the_nearest_arm_geom_distance():
 
 
 def test_imitation_escape_clearance_is_validated_and_off_in_the_shipped_recipes():
+    from hrlp.arm.research.imitate import ImitationConfig
+    from hrlp.arm.research.scripted import ScriptedGraspConfig
     from hrlp.experiments.presets import CLAW_GRIPPER, IMITATED_GRIPPER
-    from hrlp.skills.imitate import ImitationConfig
-    from hrlp.skills.scripted import ScriptedGraspConfig
 
     assert ScriptedGraspConfig().escape_clearance == 0.0
     assert CLAW_GRIPPER.expert_escape_clearance == 0.0 and IMITATED_GRIPPER.expert_escape_clearance == 0.0

@@ -5,6 +5,7 @@ import pytest
 from typer.testing import CliRunner
 
 from hrlp.arm import make
+from hrlp.arm.skill_files import add_run
 from hrlp.checkpoint import CheckpointError
 from hrlp.cli import app
 from hrlp.experiments.presets import PRESETS
@@ -21,7 +22,7 @@ def reacher_run(tmp_path_factory):
 
 def test_a_skill_acts_like_the_trained_policy_on_the_same_observation(reacher_run, tmp_path):
     lib = SkillLibrary(tmp_path)
-    lib.add(reacher_run, "reacher", k=8)
+    add_run(lib, reacher_run, "reacher", k=8)
     skill = lib.load("reacher")
     assert (skill.task, skill.k, skill.param.dim, skill.obs_dim) == ("Reacher", 8, 3, 27)
     env = make("Reacher")
@@ -36,7 +37,7 @@ def test_a_skill_acts_like_the_trained_policy_on_the_same_observation(reacher_ru
 
 def test_skill_inputs_are_checked(reacher_run, tmp_path):
     lib = SkillLibrary(tmp_path)
-    lib.add(reacher_run, "r")
+    add_run(lib, reacher_run, "r")
     skill = lib.load("r")
     with pytest.raises(ValueError, match="NaN or inf"):
         skill.torques(np.zeros((1, 24)), np.array([[np.nan, 0, 0]]))
@@ -46,11 +47,11 @@ def test_skill_inputs_are_checked(reacher_run, tmp_path):
 
 def test_library_errors_tampering_and_names(reacher_run, tmp_path):
     lib = SkillLibrary(tmp_path)
-    lib.add(reacher_run, "r1")
+    add_run(lib, reacher_run, "r1")
     with pytest.raises(ValueError, match="already exists"):
-        lib.add(reacher_run, "r1")
+        add_run(lib, reacher_run, "r1")
     with pytest.raises(ValueError, match="skill name"):
-        lib.add(reacher_run, "../escape")
+        add_run(lib, reacher_run, "../escape")
     with pytest.raises(ValueError, match="no skill 'nope'"):
         lib.load("nope")
     h = lib.manifest("r1")["sha256"]
@@ -70,7 +71,7 @@ def test_only_skill_tasks_become_skills(tmp_path):
     run = tmp_path / "rg"
     list(train(TrainConfig(task="ReachAndGrip1", steps=100, batch_steps=100, num_envs=2, episode_steps=10), run))
     with pytest.raises(ValueError, match="a skill must be trained on one of"):
-        SkillLibrary(tmp_path / "lib").add(run, "x")
+        add_run(SkillLibrary(tmp_path / "lib"), run, "x")
 
 
 def test_skills_cli_add_list_show(reacher_run, tmp_path):
@@ -89,7 +90,8 @@ def test_skills_cli_add_list_show(reacher_run, tmp_path):
 
 
 def test_shipped_skills_load_frozen_and_the_reacher_reaches():
-    from hrlp.skills import load_skill, shipped_library_root
+    from hrlp.arm.skill_files import shipped_library_root
+    from hrlp.skills import load_skill
 
     shipped = SkillLibrary(shipped_library_root())
     assert {"gripper", "reacher", "reacher3d", "s-reacher", "mover-noised", "mover-plain"} <= set(shipped.names())

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from hrlp.arm import make
+from hrlp.arm.research.starts import record_grip_starts, write_start_bank
 from hrlp.arm.tasks import MOVER_HELD_STARTS_FILE, MOVER_STARTS_FILE, grip_starts
 from hrlp.skills.library import load_skill
-from hrlp.skills.starts import record_grip_starts, write_start_bank
 
 
 def _gripped(env, q, v) -> bool:
@@ -105,7 +105,7 @@ def test_start_bank_files_are_written_atomically_and_read_without_pickle(tmp_pat
 
 
 def test_scripted_grasp_records_demonstration_starts_from_its_successful_episodes():
-    from hrlp.skills.scripted import ScriptedGraspConfig
+    from hrlp.arm.research.scripted import ScriptedGraspConfig
 
     q, v = record_grip_starts(ScriptedGraspConfig(), math.pi, 50, seed=0, every=4, episode_steps=100, num_envs=2)
     assert q.shape == (50, 16) and v.shape == (50, 15)

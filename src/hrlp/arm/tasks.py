@@ -447,7 +447,7 @@ class GripperTask(Task):
     shipped Gripper skill trains on ``start_distance=(0, 0.09)``, ``finger_opening=(0, 1)``: the
     paper's "many close positions" (Section 4.1).
     With ``starts``, a share ``starts_fraction`` of the episodes begins instead from a physics state of a start
-    bank (an ``.npz`` written by :func:`hrlp.skills.starts.write_start_bank`, read without pickle): the states at
+    bank (an ``.npz`` written by :func:`hrlp.arm.research.starts.write_start_bank`, read without pickle): the states at
     which a Manager handed over to the Gripper (``hrlp dagger``, the paper's Appendix C), or a shipped bank:
     ``"recovery"`` (``"recovery-2"``), states just after ``gripper-clearance`` (``gripper-recovery``) pushed the capsule
     away, from which it must still grip.
@@ -681,7 +681,7 @@ class MoverTask(Task):
     |angle| > 2.2 rad, where the hand reaches only low points), shifted up to 8 cm horizontally;
     targets the hand cannot reach are redrawn. Where the palm starts (``starts``):
       - grip (default): a physics state recorded along an episode in which the shipped Gripper
-        skill gripped the capsule (:mod:`hrlp.skills.starts`): the palm 0-9 cm from the capsule
+        skill gripped the capsule (:mod:`hrlp.arm.research.starts`): the palm 0-9 cm from the capsule
         with the claw opening, closing, or closed around it.
       - placed: H 5.5-6.5 cm above the capsule's centre (plain; within 1 cm horizontally) or 5-10 cm
         from it in the upper half-space (noised), the claw at rest. Closer hand starts put a finger

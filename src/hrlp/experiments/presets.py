@@ -18,8 +18,8 @@ import itertools
 import math
 from dataclasses import dataclass, field, replace
 
+from hrlp.arm.research.imitate import ImitationConfig
 from hrlp.config import PAPER_SETTINGS, Handover, MacroSpec, MicroAction, with_settings
-from hrlp.skills.imitate import ImitationConfig
 from hrlp.train import TrainConfig
 
 #: The shipped Gripper skill's start set (its recipe: the ``shipped-skills`` preset).
@@ -39,7 +39,7 @@ class Run:
     skill: tuple[str, int] | None = None
     """For a run that trains a shipped skill: the skill's name and default duration k (``hrlp skills build``)."""
     imitation: ImitationConfig | None = None
-    """For a run that starts from a student of the scripted grasp: the imitation (:func:`hrlp.skills.imitate.imitate`,
+    """For a run that starts from a student of the scripted grasp: the imitation (:func:`hrlp.arm.research.imitate.imitate`,
     behaviour cloning and DAgger) written as the run's iteration 0, which TRPO then continues to the budget (None: TRPO
     from a fresh network). Its expert and student episodes are not counted in the run's environment steps."""
     seed_offset: int = 0
@@ -302,7 +302,7 @@ CLEARANCE_GRIPPER = replace(CLAW_GRIPPER, expert_episodes=1000, noisy_expert_epi
 
 
 def _shipped_skills() -> Preset:
-    """The recipes of the skills shipped in ``src/hrlp/skills/pretrained/`` (``hrlp skills build`` trains them and adds
+    """The recipes of the skills shipped in ``src/hrlp/arm/pretrained/`` (``hrlp skills build`` trains them and adds
     them to a library; a test checks that every shipped skill's manifest records exactly its run's config)."""
     gripper = _flat("Gripper", 25_000, episode_steps=100, init_log_std=-1.0, task_kwargs={**GRIPPER_START, "c3": -8, "c4": 10})
     claw = TrainConfig(task="Gripper", workers=1, backend="batched", batch_steps=25_000, episode_steps=100,

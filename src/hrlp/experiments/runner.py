@@ -30,10 +30,10 @@ from typing import Any
 import numpy as np
 
 from hrlp import bounds
+from hrlp.arm.research.imitate import ImitationConfig
 from hrlp.atomic import LOCK_FILE, atomic_path, directory_lock
 from hrlp.checkpoint import checkpoint_exists
 from hrlp.experiments.presets import PRESETS, Preset
-from hrlp.skills.imitate import ImitationConfig
 from hrlp.train import TrainConfig
 from hrlp.training.sources import resolve_skills
 
@@ -178,7 +178,7 @@ def _run_job_locked(job: Job, reuse: bool) -> dict[str, Any]:
     torch.set_num_threads(1)
     label, started = f"{job.preset} / {job.run} / seed {job.seed}", time.perf_counter()
     if job.imitation is not None and not resume:  # the student of the scripted grasp, as the run's iteration 0
-        from hrlp.skills.imitate import imitate
+        from hrlp.arm.research.imitate import imitate
 
         imitate(job.config, job.run_dir, job.imitation,
                 log=lambda line: print(f"{label}: {line}", file=sys.stderr, flush=True))  # fmt: skip

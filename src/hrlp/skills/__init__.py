@@ -1,28 +1,17 @@
-"""Frozen, parameterised skills (the paper's macro-actions): the generic interface (:mod:`hrlp.skills.core`), skills
-from learned policies (:mod:`hrlp.skills.policy`, Stable-Baselines3 files through :mod:`hrlp.skills.sb3`), and the
-skill library on disk."""
+"""Frozen, parameterised skills (the paper's macro-actions) on any environment: the generic interface
+(:mod:`hrlp.skills.core`), skills from learned policies (:mod:`hrlp.skills.policy`, Stable-Baselines3 files through
+:mod:`hrlp.skills.sb3`), the skill library on disk (:mod:`hrlp.skills.library`) and the Manager's environment
+(:mod:`hrlp.skills.macro_env`). The arm's skills are in :mod:`hrlp.arm`."""
 
 from hrlp.skills.core import DirectControl, ObsLayout, ObsView, ParamBox, ScriptedSkill, Skill
-from hrlp.skills.library import (
-    SkillLibrary,
-    default_library_root,
-    load_skill,
-    locate_skill,
-    shipped_library_root,
-    skill_from_run,
-)
+from hrlp.skills.library import SkillLibrary, default_library_root, load_skill, locate_skill, shipped_roots
 from hrlp.skills.policy import PolicySkill, from_sb3
-from hrlp.skills.skill import PARAM_SPECS, ParamSpec
-from hrlp.skills.skill import Skill as ArmSkill
 
 __all__ = [
-    "PARAM_SPECS",
-    "ArmSkill",
     "DirectControl",
     "ObsLayout",
     "ObsView",
     "ParamBox",
-    "ParamSpec",
     "PolicySkill",
     "ScriptedSkill",
     "Skill",
@@ -31,6 +20,5 @@ __all__ = [
     "from_sb3",
     "load_skill",
     "locate_skill",
-    "shipped_library_root",
-    "skill_from_run",
+    "shipped_roots",
 ]

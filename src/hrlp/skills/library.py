@@ -10,46 +10,45 @@ and each failure is one line naming the skill:
 * both files are regular files, opened without following links and without blocking (a FIFO or ``/dev/zero`` is
   refused at once), no larger than :data:`SKILL_LIMITS`, the manifest at most 16 levels deep, and the weights' sha256
   is the manifest's;
-* the manifest's numbers are checked against the task's declared layout (``obs_dim`` = 24 + the parameters + the
-  widths of the named observation features it reads, ``act_dim`` = 9), against bounds (``k`` an integer from 1 to
-  :data:`MAX_K`), and against the tensors' dtypes and shapes in the safetensors header, before any tensor or network
-  is allocated: every weight is floating point and its shape is the one the manifest's network needs;
+* the manifest's numbers are checked by its format (:class:`SkillFormat`: a policy on any environment's,
+  :data:`POLICY_FORMAT`, here; a domain's own, registered through the :data:`DOMAINS_GROUP` entry point, as the arm's,
+  :mod:`hrlp.arm.skill_files`, whose layout is 24 numbers + the parameters + the named features, 9 torques), against
+  bounds (``k`` an integer from 1 to :data:`MAX_K`), and against the tensors' dtypes and shapes in the safetensors
+  header, before any tensor or network is allocated: every weight is floating point and its shape is the one the
+  manifest's network needs;
 * every weight and statistic is finite (no NaN or inf) and the normaliser's variances are non-negative.
 
-The library lives in ``$HRLP_SKILLS`` or ``~/.hrlp/skills``.
+The library lives in ``$HRLP_SKILLS`` or ``~/.hrlp/skills``; each domain's shipped skills are searched after it.
 """
 
 from __future__ import annotations
 
+import functools
+import importlib.metadata
 import math
 import os
 import re
 import stat
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from hrlp.arm.physics import BASE_OBS_DIM, N_JOINTS
-from hrlp.arm.registry import TASKS
 from hrlp.checkpoint import (
-    META_FILE,
     CheckpointError,
     ReadLimits,
     TensorInfo,
     load_module,
     read_checkpoint,
-    read_run_checkpoint,
-    require_keys,
     save_checkpoint,
 )
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.skills.core import ParamBox
+from hrlp.skills.core import ParamBox, Skill
 from hrlp.skills.policy import PolicySkill
-from hrlp.skills.skill import PARAM_SPECS, Initiation, ParamSpec, Skill, check_features, features_dim, initiation_for
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 #: Bounds on a skill's files: a manifest is about 2 KB and 5 levels deep, the weights of a 64x64 skill 27 KB.
@@ -60,7 +59,7 @@ MAX_K = 10_000
 FLOAT_DTYPES = ("F16", "BF16", "F32", "F64")
 
 
-class _SkillProblem(CheckpointError):
+class SkillProblem(CheckpointError):
     """Something wrong inside a skill's files, said without the skill's name (the library adds it)."""
 
 
@@ -76,14 +75,9 @@ def default_library_root() -> Path:
     return Path(os.environ.get("HRLP_SKILLS", Path.home() / ".hrlp" / "skills"))
 
 
-def shipped_library_root() -> Path:
-    """The small pretrained skills that come with hrlp (their recipes: the ``shipped-skills`` preset)."""
-    return Path(__file__).parent / "pretrained"
-
-
 def search_roots(library: str | Path | None = None) -> list[Path]:
     """Where :func:`load_skill` looks, in order: ``library`` (if given), the user's library, the shipped skills."""
-    return ([Path(library)] if library is not None else []) + [default_library_root(), shipped_library_root()]
+    return ([Path(library)] if library is not None else []) + [default_library_root(), *shipped_roots()]
 
 
 def locate_skill(name: str, roots: Sequence[str | Path]) -> SkillLibrary:
@@ -104,43 +98,6 @@ def load_skill(name: str, library: str | Path | None = None) -> Skill:
     return locate_skill(name, search_roots(library)).load(name)
 
 
-def skill_from_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The trained policy's tensors and the facts about it, from a run directory written by ``hrlp train``."""
-    tensors, meta, cfg = read_run_checkpoint(Path(run_dir) / "checkpoint")
-    if meta.get("kind", "flat") != "flat":
-        raise ValueError(f"{run_dir}: a skill is a flat policy; this run trained a {meta['kind']}")
-    task = cfg.task.removeprefix("hrlp/").removesuffix("-v0")
-    if task not in PARAM_SPECS:
-        raise ValueError(f"{run_dir}: a skill must be trained on one of {', '.join(PARAM_SPECS)}, this run trained {task}")
-    require_keys(meta, {"obs_dim": int, "act_dim": int}, Path(run_dir) / "checkpoint" / META_FILE)
-    features: tuple[str, ...] = ()
-    if meta["obs_dim"] != BASE_OBS_DIM + PARAM_SPECS[task].dim:  # the task observed more: which named features
-        features = TASKS[task].build(**cfg.task_kwargs).observed_features
-        if meta["obs_dim"] != (want := BASE_OBS_DIM + PARAM_SPECS[task].dim + features_dim(features)):
-            named = ", ".join(features) or "none"
-            raise ValueError(f"{run_dir}: its policy observes {meta['obs_dim']} numbers, a {task} skill {want} (24, its "
-                             f"parameters and its task's named features: {named})")  # fmt: skip
-    kept = {k: v for k, v in tensors.items() if k.startswith(("policy.", "normalizer."))}
-    return kept, {"task": task, "source": meta, "features": list(features)}
-
-
-def _param_spec(manifest: dict[str, Any]) -> ParamSpec:
-    """The skill's parameter specification: the one declared in code for its task (:data:`PARAM_SPECS`); the manifest's
-    copy must agree on the layout (dimension, where it enters the observation), so a skill file cannot redefine it."""
-    task = manifest.get("task")
-    if not isinstance(task, str) or task not in PARAM_SPECS:
-        raise _SkillProblem(f"skill of unknown task {_short(task)} (known: {', '.join(PARAM_SPECS)})")
-    spec = PARAM_SPECS[task]
-    try:
-        recorded = ParamSpec.from_json(manifest["param"])
-    except (KeyError, TypeError, ValueError, AttributeError) as e:
-        raise _SkillProblem(f"manifest's 'param' is malformed ({_short(e, 80)})") from None
-    if (recorded.dim, recorded.obs_start) != (spec.dim, spec.obs_start):
-        raise _SkillProblem(f"manifest's parameters (dim {recorded.dim} at {recorded.obs_start}) do not match "
-                            f"task {task}'s (dim {spec.dim} at {spec.obs_start})")  # fmt: skip
-    return spec
-
-
 def _short(value: Any, width: int = 40) -> str:
     """``repr(value)`` on one line, cut to ``width`` characters."""
     text = " ".join(repr(value).split()) if not isinstance(value, BaseException) else " ".join(str(value).split())
@@ -152,63 +109,108 @@ def _integer(m: dict[str, Any], key: str, low: int, high: int, what: str) -> int
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
         bound = f"from {low} to {high:,}" if low != high else f"{low}"
         got = "nothing" if key not in m else f"{_short(value)} ({type(value).__name__})"
-        raise _SkillProblem(f"manifest's {key!r} ({what}) must be an integer {bound}, got {got}")
+        raise SkillProblem(f"manifest's {key!r} ({what}) must be an integer {bound}, got {got}")
     return value
 
 
-def _check_any(m: dict[str, Any]) -> None:
-    """A manifest of either format (:func:`_check_manifest` for the arm's, :func:`_check_policy_manifest` for a policy
-    on any environment's), checked; raises :class:`_SkillProblem`."""
-    if m.get("format") == POLICY_FORMAT:
-        _check_policy_manifest(m)
-    else:
-        _check_manifest(m)
+@dataclass(frozen=True)
+class SkillFormat:
+    """How a library reads one kind of skill file: ``check(manifest)`` checks every number of a manifest (raising
+    :class:`SkillProblem`, one line) before any tensor is read; ``build(name, tensors, manifest, sha256)`` makes the frozen
+    skill from checked files. Every format stores a :class:`~hrlp.policies.mlp.GaussianPolicy`'s weights and its
+    normaliser (:func:`_expected_tensors`)."""
+
+    check: Callable[[dict[str, Any]], object]
+    build: Callable[[str, dict[str, torch.Tensor], dict[str, Any], str], Skill]
 
 
-#: The ``format`` of a skill file holding a policy trained on any Gymnasium environment (a :class:`PolicySkill`); an
-#: arm skill's manifest has no ``format``.
+#: The ``format`` of a skill file holding a policy trained on any Gymnasium environment (a :class:`PolicySkill`).
 POLICY_FORMAT = "policy"
+#: The format of a manifest that names none: skill files were the arm's before formats had names (:mod:`hrlp.arm`).
+UNNAMED_FORMAT = "arm"
+_FORMATS: dict[str, SkillFormat] = {}
+_SHIPPED: list[Path] = []
+#: The entry-point group through which a domain package (``hrlp.arm``) registers its skill formats and shipped skills
+#: (:func:`register_format`, :func:`register_shipped`) without this module importing it.
+DOMAINS_GROUP = "hrlp.domains"
+
+
+def register_format(name: str, fmt: SkillFormat) -> None:
+    """Read manifests whose ``format`` is ``name`` with ``fmt`` (a domain's own skill files)."""
+    _FORMATS[name] = fmt
+
+
+def register_shipped(root: Path) -> None:
+    """Search ``root`` after the user's library (a domain's shipped skills)."""
+    if root not in _SHIPPED:
+        _SHIPPED.append(root)
+
+
+@functools.cache
+def _load_domains() -> None:
+    """Import every package registered under :data:`DOMAINS_GROUP` once, so that they register their formats."""
+    for point in importlib.metadata.entry_points(group=DOMAINS_GROUP):
+        point.load()
+
+
+def shipped_roots() -> list[Path]:
+    """The shipped skills of every domain, in the order they registered."""
+    _load_domains()
+    return list(_SHIPPED)
+
+
+def _format(m: dict[str, Any]) -> SkillFormat:
+    _load_domains()
+    name = m.get("format", UNNAMED_FORMAT)
+    if name not in _FORMATS:
+        raise SkillProblem(f"skill file of unknown format {_short(name)} (known: {', '.join(sorted(_FORMATS))})")
+    return _FORMATS[name]
+
+
+def _check_any(m: dict[str, Any]) -> None:
+    """A manifest checked by its format's own check; raises :class:`SkillProblem`."""
+    _format(m).check(m)
 
 
 def _check_policy_manifest(m: dict[str, Any]) -> tuple[ParamBox, int, tuple[int, ...]]:
     """``(params, k, hidden)`` of a policy skill's manifest, whose every number is checked: its observation parts
     (names and widths, summing to ``obs_dim``), the part its parameters replace and their box, its action bounds
-    (``act_dim`` finite pairs), its early end, its network and normaliser; raises :class:`_SkillProblem`."""
+    (``act_dim`` finite pairs), its early end, its network and normaliser; raises :class:`SkillProblem`."""
     if m.get("kind") != "skill":
-        raise _SkillProblem(f"not a skill (kind {_short(m.get('kind'))})")
+        raise SkillProblem(f"not a skill (kind {_short(m.get('kind'))})")
     k = _integer(m, "k", 1, MAX_K, "default duration")
     parts = m.get("parts")
     if not isinstance(parts, list) or not parts or not all(
         isinstance(p, list) and len(p) == 2 and isinstance(p[0], str) and isinstance(p[1], int) and not isinstance(p[1], bool)
         and 0 < p[1] <= 1 << 20 for p in parts
     ):  # fmt: skip
-        raise _SkillProblem(f"manifest's 'parts' must be a list of [name, width] pairs, got {_short(parts)}")
+        raise SkillProblem(f"manifest's 'parts' must be a list of [name, width] pairs, got {_short(parts)}")
     names = [p[0] for p in parts]
     if len(set(names)) != len(names):
-        raise _SkillProblem(f"manifest's 'parts' name a part twice ({', '.join(names)})")
+        raise SkillProblem(f"manifest's 'parts' name a part twice ({', '.join(names)})")
     obs_dim = sum(p[1] for p in parts)
     _integer(m, "obs_dim", obs_dim, obs_dim, "observation size, the widths of its parts")
     act_dim = _integer(m, "act_dim", 1, 1 << 16, "action size")
     param_part = m.get("param_part")
     if param_part is not None and param_part not in names:
-        raise _SkillProblem(f"manifest's 'param_part' {_short(param_part)} is not one of its parts ({', '.join(names)})")
+        raise SkillProblem(f"manifest's 'param_part' {_short(param_part)} is not one of its parts ({', '.join(names)})")
     try:
         box = ParamBox.from_json(m.get("param") or {})
     except ValueError as e:
-        raise _SkillProblem(f"manifest's 'param': {_short(e, 120)}") from None
+        raise SkillProblem(f"manifest's 'param': {_short(e, 120)}") from None
     width = dict(map(tuple, parts)).get(param_part, 0) if param_part else 0
     if box.dim != width:
-        raise _SkillProblem(f"manifest's parameter box has {box.dim} numbers, its parameter part {width}")
+        raise SkillProblem(f"manifest's parameter box has {box.dim} numbers, its parameter part {width}")
     for key in ("action_low", "action_high"):
         v = m.get(key)
         if not isinstance(v, list) or len(v) != act_dim or not all(_number(x) and math.isfinite(x) for x in v):
-            raise _SkillProblem(f"manifest's {key!r} must be {act_dim} finite numbers, got {_short(v)}")
+            raise SkillProblem(f"manifest's {key!r} must be {act_dim} finite numbers, got {_short(v)}")
     if any(lo > hi for lo, hi in zip(m["action_low"], m["action_high"], strict=True)):
-        raise _SkillProblem("manifest's action_low exceeds its action_high")
+        raise SkillProblem("manifest's action_low exceeds its action_high")
     done = m.get("done")
     if done is not None and (not isinstance(done, dict) or done.get("part") not in names
                              or not (_number(done.get("within")) and 0 < done["within"] < math.inf)):  # fmt: skip
-        raise _SkillProblem(f"manifest's 'done' must be {{part: one of its parts, within: a positive distance}}, got "
+        raise SkillProblem(f"manifest's 'done' must be {{part: one of its parts, within: a positive distance}}, got "
                             f"{_short(done)}")  # fmt: skip
     hidden = _check_network(m, obs_dim)
     return box, k, hidden
@@ -218,50 +220,19 @@ def _check_network(m: dict[str, Any], obs_dim: int) -> tuple[int, ...]:
     """The manifest's hidden widths, normaliser settings and training record, checked; returns ``hidden``."""
     hidden = m.get("hidden")
     if not isinstance(hidden, list) or not all(isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in hidden):
-        raise _SkillProblem(f"manifest's 'hidden' must be a list of positive layer widths, got {_short(hidden)}")
+        raise SkillProblem(f"manifest's 'hidden' must be a list of positive layer widths, got {_short(hidden)}")
     norm = m.get("normalizer")
     if not isinstance(norm, dict) or norm.get("shape") != [obs_dim]:
-        raise _SkillProblem(f"manifest's 'normalizer' must be an object with shape [{obs_dim}], got {_short(norm)}")
+        raise SkillProblem(f"manifest's 'normalizer' must be an object with shape [{obs_dim}], got {_short(norm)}")
     clip, eps, frozen = norm.get("clip"), norm.get("eps", 1e-8), norm.get("frozen", False)
     if not (clip is None or (_number(clip) and clip > 0)) or not (_number(eps) and eps >= 0) or not isinstance(frozen, bool):
-        raise _SkillProblem(f"manifest's normaliser settings are invalid (clip {_short(clip)}, eps {_short(eps)}, "
+        raise SkillProblem(f"manifest's normaliser settings are invalid (clip {_short(clip)}, eps {_short(eps)}, "
                             f"frozen {_short(frozen)})")  # fmt: skip
     trained = m.get("trained")
     if not isinstance(trained, dict) or not isinstance(trained.get("config"), dict):
-        raise _SkillProblem(f"manifest's 'trained' must be an object holding the training 'config', got {_short(trained)}")
+        raise SkillProblem(f"manifest's 'trained' must be an object holding the training 'config', got {_short(trained)}")
     _integer(trained, "env_steps", 0, 2**62, "environment steps it was trained for")
     return tuple(hidden)
-
-
-def _check_manifest(m: dict[str, Any]) -> tuple[ParamSpec, int, tuple[int, ...], tuple[str, ...]]:
-    """``(param, k, hidden, features)`` of an arm skill's manifest, whose every number is checked; raises
-    :class:`_SkillProblem`. A manifest without ``features`` (every skill written before them) reads none."""
-    if m.get("kind") != "skill":
-        raise _SkillProblem(f"not a skill (kind {_short(m.get('kind'))})")
-    param = _param_spec(m)
-    k = _integer(m, "k", 1, MAX_K, "default duration")
-    try:
-        features = check_features(m.get("features", []), "manifest's 'features'")
-    except ValueError as e:
-        raise _SkillProblem(_short(e, 200)) from None
-    obs_dim = BASE_OBS_DIM + param.dim + features_dim(features)
-    with_features = f" reading {', '.join(features)}" if features else ""
-    _integer(m, "obs_dim", obs_dim, obs_dim, f"observation size of a {m['task']} skill{with_features}")
-    _integer(m, "act_dim", N_JOINTS, N_JOINTS, "torques of the arm's joints")
-    hidden = _check_network(m, obs_dim)
-    _initiation(m)
-    return param, k, hidden, features
-
-
-def _initiation(m: dict[str, Any]) -> Initiation:
-    """The skill's initiation set from its training task and settings (:func:`~hrlp.skills.skill.initiation_for`)."""
-    kwargs = m["trained"]["config"].get("task_kwargs")
-    if kwargs is not None and not isinstance(kwargs, dict):
-        raise _SkillProblem(f"manifest's training 'task_kwargs' must be an object, got {_short(kwargs)}")
-    try:
-        return initiation_for(m["task"], kwargs)
-    except ValueError as e:
-        raise _SkillProblem(f"manifest's training task settings: {_short(e, 200)}") from None
 
 
 def _number(x: Any) -> bool:
@@ -290,13 +261,13 @@ def _check_header(m: dict[str, Any], header: dict[str, TensorInfo]) -> None:
         said = ", ".join(p for p in (f"missing {', '.join(missing)}" if missing else "",
                                      f"unexpected {', '.join(unexpected)}" if unexpected else "") if p)  # fmt: skip
         said = said if len(said) <= 160 else said[:157] + "..."
-        raise _SkillProblem(f"its weights do not fit the network its manifest describes ({network}): {said}")
+        raise SkillProblem(f"its weights do not fit the network its manifest describes ({network}): {said}")
     for name, info in sorted(header.items()):
         if info.dtype not in FLOAT_DTYPES:
-            raise _SkillProblem(f"{name} is {_short(info.dtype)}; a skill's weights must be floating point "
+            raise SkillProblem(f"{name} is {_short(info.dtype)}; a skill's weights must be floating point "
                                 f"({', '.join(FLOAT_DTYPES)})")  # fmt: skip
         if info.shape != expected[name]:
-            raise _SkillProblem(f"{name} has shape {list(info.shape)} in its weights, {list(expected[name])} in the "
+            raise SkillProblem(f"{name} has shape {list(info.shape)} in its weights, {list(expected[name])} in the "
                                 f"network its manifest describes ({network})")  # fmt: skip
 
 
@@ -305,10 +276,10 @@ def _check_values(tensors: dict[str, torch.Tensor]) -> None:
     for name, tensor in sorted(tensors.items()):
         bad = ~torch.isfinite(tensor)
         if bool(bad.any()):
-            raise _SkillProblem(f"{name} holds NaN or inf ({int(bad.sum())} of {tensor.numel()} values)")
+            raise SkillProblem(f"{name} holds NaN or inf ({int(bad.sum())} of {tensor.numel()} values)")
     for name in ("normalizer.var", "normalizer.count"):
         if bool((tensors[name] < 0).any()):
-            raise _SkillProblem(f"{name} is negative")
+            raise SkillProblem(f"{name} is negative")
 
 
 def _entry_kind(path: Path) -> str:
@@ -363,47 +334,11 @@ class SkillLibrary:
         try:
             tensors, m, sha256 = read_checkpoint(path, limits=SKILL_LIMITS, before_tensors=_check_header)
             _check_values(tensors)
-        except _SkillProblem as e:
+        except SkillProblem as e:
             raise CheckpointError(f"skill {name!r} ({path}): {e}") from None
         except CheckpointError as e:
             raise CheckpointError(f"skill {name!r}: {e}") from None
         return tensors, m, sha256
-
-    def add(
-        self, run_dir: Path, name: str, k: int = 15, overwrite: bool = False, lineage: dict[str, Any] | None = None
-    ) -> Path:
-        """Turn a finished training run into the named skill with default duration ``k``; returns its directory.
-
-        ``lineage`` (JSON), if given, is recorded in the manifest: where the skill came from (``hrlp dagger`` records
-        the parent skill and its sha256, the Manager whose hand-over states it was retrained from, and the round). A
-        run started from a skill (``init_from``) records that skill and the sha256 it had then when none is given."""
-        check_skill_name(name)
-        if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= MAX_K:
-            raise ValueError(f"skill {name}: default duration k must be a positive integer (at most {MAX_K:,}), got {k!r}")
-        target = self.root / name
-        if target.exists() and not overwrite:
-            raise ValueError(f"skill {name!r} already exists in {self.root}; pass overwrite to replace it")
-        tensors, facts = skill_from_run(run_dir)
-        src = facts["source"]
-        manifest = {
-            "kind": "skill",
-            "name": name,
-            "task": facts["task"],
-            "k": k,
-            "param": PARAM_SPECS[facts["task"]].to_json(),
-            "features": facts["features"],
-            "obs_dim": src["obs_dim"],
-            "act_dim": src["act_dim"],
-            "hidden": src["config"]["hidden"],
-            "normalizer": src["normalizer"],
-            "trained": {"config": src["config"], "iteration": src["iteration"], "env_steps": src["env_steps"]},
-        }
-        init_from = src["config"].get("init_from")
-        if lineage is None and isinstance(init_from, str):  # fine-tuned from a skill (hrlp train --init-from)
-            lineage = {"parent": init_from, "parent_sha256": src.get("init_from_sha256")}
-        if lineage is not None:
-            manifest["lineage"] = lineage
-        return save_checkpoint(target, tensors, manifest)
 
     def manifest(self, name: str) -> dict[str, Any]:
         """The manifest of the skill ``name`` (with its content hash under ``sha256``), once the skill has passed
@@ -411,68 +346,75 @@ class SkillLibrary:
         _, m, sha256 = self._read(name)
         return {**m, "sha256": sha256}
 
-    def load(self, name: str) -> Skill | PolicySkill:
+    def load(self, name: str) -> Skill:
         """The named skill, frozen. Raises a one-line error naming the skill for a missing, tampered, truncated or
         degenerate one (module docstring); the network is built only from a manifest its tensors agree with."""
         tensors, m, sha256 = self._read(name)
-        if m.get("format") == POLICY_FORMAT:
-            return self._load_policy(name, tensors, m, sha256)
-        param, k, hidden, features = _check_manifest(m)
-        policy = GaussianPolicy(m["obs_dim"], m["act_dim"], hidden)
-        stats = {key.removeprefix("normalizer."): v for key, v in tensors.items() if key.startswith("normalizer.")}
         try:
-            load_module("policy", policy, tensors)
-            norm = RunningNormalizer.from_config(m["normalizer"], stats)
+            return _format(m).build(name, tensors, m, sha256)
         except ValueError as e:  # not expected after the checks; named all the same
             raise CheckpointError(f"skill {name!r} ({self.root / name}): {_short(e, 200)}") from None
-        return Skill(name, m["task"], param, k, policy, norm, sha256, features, _initiation(m))
-
-    def _load_policy(self, name: str, tensors: dict[str, torch.Tensor], m: dict[str, Any], sha256: str) -> PolicySkill:
-        """A policy skill (:data:`POLICY_FORMAT`) from its checked files: its mean action in NumPy on the frozen
-        normaliser's output, clipped to its action bounds."""
-        box, k, hidden = _check_policy_manifest(m)
-        policy = GaussianPolicy(m["obs_dim"], m["act_dim"], hidden)
-        stats = {key.removeprefix("normalizer."): v for key, v in tensors.items() if key.startswith("normalizer.")}
-        try:
-            load_module("policy", policy, tensors)
-            norm = RunningNormalizer.from_config(m["normalizer"], stats)
-        except ValueError as e:  # not expected after the checks; named all the same
-            raise CheckpointError(f"skill {name!r} ({self.root / name}): {_short(e, 200)}") from None
-        norm.freeze()
-        mean = NumpyMLP(policy.mean_net)
-        done = m.get("done") or {}
-        skill = PolicySkill(name, [tuple(p) for p in m["parts"]], m.get("param_part"), box,
-                            lambda x: mean(norm.normalize(x)), np.asarray(m["action_low"]), np.asarray(m["action_high"]),
-                            k=k, done_part=done.get("part"), done_within=done.get("within"))  # fmt: skip
-        skill.content_hash = sha256
-        return skill
 
     def save(self, name: str, tensors: dict[str, torch.Tensor], manifest: dict[str, Any], overwrite: bool = False) -> Path:
-        """Write a policy skill (:data:`POLICY_FORMAT`) made elsewhere (:func:`hrlp.training.loading.policy_skill_files`)
-        as ``name``, after the checks :meth:`load` makes; returns its directory."""
+        """Write the skill ``name`` from its tensors and manifest (a :data:`POLICY_FORMAT` one unless the manifest names
+        another format), after the checks :meth:`load` makes; returns its directory. Refuses to replace a skill unless
+        ``overwrite``."""
         check_skill_name(name)
         target = self.root / name
         if target.exists() and not overwrite:
             raise ValueError(f"skill {name!r} already exists in {self.root}; pass overwrite to replace it")
-        m = {**manifest, "kind": "skill", "format": POLICY_FORMAT, "name": name}
+        m = {"format": POLICY_FORMAT, **manifest, "kind": "skill", "name": name}
         try:
-            _check_policy_manifest(m)
-        except _SkillProblem as e:
+            _check_any(m)
+        except SkillProblem as e:
             raise ValueError(f"skill {name!r}: {e}") from None
         return save_checkpoint(target, tensors, m)
 
 
+def frozen_network(tensors: dict[str, torch.Tensor], m: dict[str, Any], hidden: tuple[int, ...]) -> tuple[
+        GaussianPolicy, RunningNormalizer]:  # fmt: skip
+    """The policy and frozen normaliser a checked manifest ``m`` describes, with ``tensors`` loaded into them."""
+    policy = GaussianPolicy(m["obs_dim"], m["act_dim"], hidden)
+    stats = {key.removeprefix("normalizer."): v for key, v in tensors.items() if key.startswith("normalizer.")}
+    load_module("policy", policy, tensors)
+    norm = RunningNormalizer.from_config(m["normalizer"], stats)
+    norm.freeze()
+    return policy, norm
+
+
+def _build_policy(name: str, tensors: dict[str, torch.Tensor], m: dict[str, Any], sha256: str) -> PolicySkill:
+    """A policy skill (:data:`POLICY_FORMAT`) from its checked files: its mean action in NumPy on the frozen
+    normaliser's output, clipped to its action bounds."""
+    box, k, hidden = _check_policy_manifest(m)
+    policy, norm = frozen_network(tensors, m, hidden)
+    mean = NumpyMLP(policy.mean_net)
+    done = m.get("done") or {}
+    skill = PolicySkill(name, [tuple(p) for p in m["parts"]], m.get("param_part"), box,
+                        lambda x: mean(norm.normalize(x)), np.asarray(m["action_low"]), np.asarray(m["action_high"]),
+                        k=k, done_part=done.get("part"), done_within=done.get("within"))  # fmt: skip
+    skill.content_hash = sha256
+    return skill
+
+
+register_format(POLICY_FORMAT, SkillFormat(_check_policy_manifest, _build_policy))
+
+
 __all__ = [
+    "DOMAINS_GROUP",
     "FLOAT_DTYPES",
     "MAX_K",
     "POLICY_FORMAT",
     "SKILL_LIMITS",
+    "SkillFormat",
     "SkillLibrary",
+    "SkillProblem",
     "check_skill_name",
     "default_library_root",
+    "frozen_network",
     "load_skill",
     "locate_skill",
+    "register_format",
+    "register_shipped",
     "search_roots",
-    "shipped_library_root",
-    "skill_from_run",
+    "shipped_roots",
 ]

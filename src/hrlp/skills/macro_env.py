@@ -1,15 +1,15 @@
 """The environment the Manager acts in: each action runs a frozen skill for k low-level steps.
 
 Section 1.1 and Figure 1: the Manager selects one of N macro-actions and passes it a vector of
-parameters; the macro-action then emits joint torques for k steps (8, 10 or 15 in the paper),
-or until the episode ends, and the Manager sees the state after it. The optional micro-action
-gives the Manager direct torque control for ``duration`` steps.
+parameters; the macro-action then emits the environment's actions for k steps (8, 10 or 15 in the paper),
+until it says it is done, or until the episode ends, and the Manager sees the state after it. The optional
+micro-action gives the Manager direct control of the environment's action for ``duration`` steps.
 
 Action space: ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))``: the choice, then one parameter
 block per choice (the hierarchical distribution fills every block; only the chosen one is
 used). Every block is normalised to ``[-1, 1]``: a skill's block maps affinely onto its
-parameter box (:class:`~hrlp.skills.skill.ParamSpec`, e.g. the Reacher's reachable workspace
-in metres) and the micro-action's block is scaled by its torque bound. A macro-action lasting
+parameter box (:class:`~hrlp.skills.core.ParamBox`, e.g. the arm's Reacher's reachable workspace
+in metres) and the micro-action's block onto the action space, shrunk by its bound. A macro-action lasting
 tau low-level steps returns the discounted in-macro reward ``sum_j gamma^j r_j`` and
 ``info['discount'] = gamma^tau``, the factor the Manager's return and advantage estimator apply
 to the next decision (semi-Markov discounting).
@@ -29,53 +29,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hrlp.arm.batched import BatchedArmEnv
-from hrlp.arm.physics import BASE_PARTS, N_JOINTS
-from hrlp.config import Handover, MicroAction
+from hrlp.config import MicroAction
 from hrlp.envs.vector import VectorStep, check_num_envs, info_arrays, info_success, physics_seconds
-from hrlp.skills.core import DirectControl, Hierarchy, MacroStep, ObsLayout, ObsView, ParamBox, decide
-from hrlp.skills.core import Skill as GenericSkill
-from hrlp.skills.core import initiated as core_initiated
-from hrlp.skills.skill import (
-    HANDOVER_POINT,
-    HANDOVER_PREGRASP,
-    HANDOVER_TARGET,
-    MOVE_TASKS,
-    POINT_TASKS,
-    ParamSpec,
-    Skill,
-)
-
-
-class Driven(GenericSkill):
-    """An arm skill driven for hand-over (:class:`Handover`): its parameters in another box (``box``, e.g. offsets from
-    the capsule), and for a point skill the goal raised until the hand is above it and the claw held open."""
-
-    def __init__(self, skill: Skill, box: ParamBox, handover: Handover | None) -> None:
-        self.skill, self.handover, self.params = skill, handover, box
-        self.name, self.k, self.reads, self.chains, self.cost = skill.name, skill.k, skill.reads, skill.chains, skill.cost
-        self._raised = np.zeros(0, dtype=bool)  # per world: the goal is still raised (until the hand is above it)
-
-    def begin(self, obs: ObsView, params: np.ndarray) -> None:
-        if self._raised.size <= (top := int(obs.idx.max(initial=-1))):
-            self._raised = np.resize(self._raised, top + 1)
-        self._raised[obs.idx] = True
-
-    def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
-        h, block = self.handover, params
-        if h is None:
-            return self.skill.act(obs, block)
-        if h.approach_height > 0:
-            off = np.linalg.norm(obs["hand"][:, :2] - block[:, :2], axis=1)
-            self._raised[obs.idx] &= off >= h.approach_radius
-            block = block + np.outer(self._raised[obs.idx], (0.0, 0.0, h.approach_height))
-        torques = self.skill.act(obs, block)
-        if h.open_torque > 0:
-            torques[:, N_JOINTS - 2 :] = (-h.open_torque, h.open_torque)
-        return torques
-
-    def initiable(self, obs: ObsView) -> np.ndarray | None:
-        return self.skill.initiable(obs)
+from hrlp.skills.core import DirectControl, Hierarchy, MacroStep, ObsLayout, ObsView, ParamBox, Skill, decide, initiated
 
 
 class MacroEnv(gym.Env):
@@ -91,9 +47,9 @@ class MacroEnv(gym.Env):
         micro: the micro-action (:class:`~hrlp.skills.core.DirectControl` over the environment's action space), or None.
             With no skills and a micro-action this is the flat baseline through the same code.
         gamma: the low-level discount used inside a macro-action.
-        handover: how the arm's point and moving skills are driven (:class:`Handover`); its ``initiation`` enforces
-            initiation sets.
         chain: enforce the skills' initiation tests (:func:`~hrlp.skills.core.initiated`).
+
+    A domain drives its skills before they get here (the arm's hand-over: :func:`hrlp.arm.handover.drive`).
 
     ``on_substep``, if set, is called with the active macro-action's name after every low-level step
     (rendering uses it to record every frame and label it).
@@ -101,9 +57,8 @@ class MacroEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"]}  # noqa: RUF012 (Gymnasium's convention)
 
-    def __init__(self, env: gym.Env, skills: Sequence[GenericSkill], k: int | None = None,
-                 micro: MicroAction | None = None, gamma: float = 0.99, handover: Handover | None = None,
-                 chain: bool = False) -> None:  # fmt: skip
+    def __init__(self, env: gym.Env, skills: Sequence[Skill], k: int | None = None, micro: MicroAction | None = None,
+                 gamma: float = 0.99, chain: bool = False) -> None:  # fmt: skip
         if not skills and micro is None:
             raise ValueError("MacroEnv needs at least one skill or the micro-action")
         if k is not None and (isinstance(k, bool) or not isinstance(k, int) or k < 1):
@@ -113,28 +68,18 @@ class MacroEnv(gym.Env):
         if not isinstance(env.action_space, gym.spaces.Box):
             raise ValueError(f"a Manager's skills emit Box actions; this environment's action space is {env.action_space}")
         self.env, self.skills, self.micro, self.gamma = env, list(skills), micro, float(gamma)
-        self.handover = handover
         space = env.observation_space
         self._dict = isinstance(space, gym.spaces.Dict)
         layout = ObsLayout.of_space(space, getattr(env.unwrapped, "observation_parts", None))
-        self.points = [isinstance(s, Skill) and s.task in POINT_TASKS for s in self.skills]
-        #: What the Manager's block of each skill means (:meth:`_spec`): an arm skill's ParamSpec, else its ParamBox.
-        self.param_specs = [self._spec(s, pt) for s, pt in zip(self.skills, self.points, strict=True)]
-        entries: list[GenericSkill] = [self._drive(s, pt, spec) for s, pt, spec in
-                                       zip(self.skills, self.points, self.param_specs, strict=True)]  # fmt: skip
+        entries: list[Skill] = list(self.skills)
         if micro:
             entries.append(DirectControl(env.action_space, micro.duration, micro.penalty, micro.max_torque))
         measurable = tuple(getattr(env.unwrapped, "measurable", ()))
-        if any(p.frame == "target" for p in self.param_specs if isinstance(p, ParamSpec)) and "target" not in layout.names:
-            task = getattr(env.unwrapped, "task", None)
-            raise ValueError(f"Handover.target_relative needs a task that observes a target (reach-and-move, the Movers); "
-                             f"{type(task).__name__} does not")  # fmt: skip
         for e in entries:
             e.check(layout, env.action_space, measurable)
         durations = np.array([k or s.k for s in self.skills] + ([micro.duration] if micro else []), dtype=np.int64)
-        chained = chain or bool(handover and handover.initiation)
         self.hierarchy = Hierarchy(tuple(entries), durations, layout, self.gamma, int(np.prod(env.action_space.shape)),
-                                   chained)  # fmt: skip
+                                   chain)  # fmt: skip
         self.durations, self.names = durations, self.hierarchy.names
         self.param_dims, self.offsets = self.hierarchy.param_dims, self.hierarchy.offsets
         blocks = [gym.spaces.Box(-1.0, 1.0, shape=(d,), dtype=np.float64) for d in self.param_dims]
@@ -150,26 +95,10 @@ class MacroEnv(gym.Env):
         """The named parts of the (flattened) observation."""
         return self.hierarchy.layout
 
-    def _spec(self, skill: GenericSkill, point: bool) -> ParamSpec | ParamBox:
-        """What the Manager's block of ``skill`` means: an arm skill's own specification, or with hand-over the
-        capsule-relative box for point skills (``relative``) and the target-relative box for moving skills
-        (``target_relative``); any other skill's :class:`~hrlp.skills.core.ParamBox`."""
-        if not isinstance(skill, Skill):
-            return skill.params
-        h = self.handover
-        if h and h.relative and point:
-            return HANDOVER_PREGRASP if h.pregrasp else HANDOVER_POINT
-        if h and h.target_relative and skill.task in MOVE_TASKS:
-            return HANDOVER_TARGET
-        return skill.param
-
-    def _drive(self, skill: GenericSkill, point: bool, spec: ParamSpec | ParamBox) -> GenericSkill:
-        """The skill as the Manager runs it: an arm skill whose box changed or that is driven for hand-over wrapped in
-        :class:`Driven`, any other as it is."""
-        if not isinstance(skill, Skill) or not isinstance(spec, ParamSpec):
-            return skill
-        drive = self.handover if point else None
-        return skill if spec == skill.param and drive is None else Driven(skill, spec.box(), drive)
+    @property
+    def param_boxes(self) -> list[ParamBox]:
+        """What the Manager's block of each macro-action means: each skill's :class:`~hrlp.skills.core.ParamBox`."""
+        return [s.params for s in self.hierarchy.skills]
 
     def observe(self, obs: Any) -> np.ndarray:
         """The environment's observation as the Manager's flat row (a Dict flattened in its space's key order)."""
@@ -205,7 +134,7 @@ class MacroEnv(gym.Env):
         if not self.hierarchy.chain:
             return int(choice)
         view = ObsView(self._obs[None], self.layout, np.zeros(1, dtype=np.int64), self._measure)
-        return int(core_initiated(self.hierarchy.skills, view, np.array([choice]), np.array([self._ran]))[0])
+        return int(initiated(self.hierarchy.skills, view, np.array([choice]), np.array([self._ran]))[0])
 
     def _measure(self, name: str, idx: np.ndarray) -> np.ndarray:
         return np.stack([self.env.unwrapped.measure(name) for _ in idx])  # type: ignore[attr-defined]
@@ -303,13 +232,6 @@ def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
     for e, o, c in zip(envs, res.obs, res.choice, strict=True):
         e._obs, e._ran = o.copy(), int(c)
     return dataclasses.replace(res, infos=infos)
-
-
-def initiated(skills: Sequence[Skill], obs: np.ndarray, choice: np.ndarray, ran: np.ndarray | None = None) -> np.ndarray:
-    """:func:`hrlp.skills.core.initiated` for arm skills on arm observations ``[N, >=24]`` (the base parts)."""
-    rows = np.asarray(obs, dtype=np.float64)
-    layout = ObsLayout.of_space(gym.spaces.Box(-np.inf, np.inf, (rows.shape[1],)), BASE_PARTS)
-    return core_initiated(skills, ObsView(rows, layout, np.arange(len(rows))), choice, ran)
 
 
 class MacroVectorEnv:
@@ -426,128 +348,3 @@ class MacroVectorEnv:
         """Close every environment."""
         for env in self.envs:
             env.close()
-
-
-class BatchedMacroVectorEnv:
-    """A Manager's ``N`` environments over one :class:`~hrlp.arm.batched.BatchedArmEnv`: the macro-action logic of
-    :func:`step_macros` (:func:`decide`, batched skill inference) with the physics of every world stepped in one call
-    per low-level step, the worlds whose macro-action has ended waiting (:meth:`BatchedArmEnv.advance`).
-
-    Args:
-        worlds: the ``N`` worlds of the low-level task; this object resets and steps them from now on.
-        layout: a :class:`MacroEnv` of the same task giving the macro-actions (skills, durations, parameter blocks,
-            hand-over, micro-action, gamma); its own environment is not stepped.
-
-    Its steps are :class:`MacroVectorEnv`'s over ``N`` MacroEnvs of the same task and seeds, to within the batched
-    physics' agreement with ArmEnv's (about 1e-7, :mod:`hrlp.arm.batched`); :meth:`get_state` has the same format.
-    """
-
-    def __init__(self, worlds: BatchedArmEnv, layout: MacroEnv) -> None:
-        if not isinstance(layout, MacroEnv):
-            raise ValueError(f"BatchedMacroVectorEnv: the layout must be a MacroEnv, got {type(layout).__name__}")
-        if type(worlds.task) is not type(layout.env.task):
-            raise ValueError(f"BatchedMacroVectorEnv: the worlds run {type(worlds.task).__name__}, the layout's "
-                             f"macro-actions {type(layout.env.task).__name__}")  # fmt: skip
-        read = dict.fromkeys(f for s in layout.skills for f in s.features)
-        if missing := [f for f in read if f not in worlds.measured_features]:
-            raise ValueError(f"BatchedMacroVectorEnv: the skills read {', '.join(missing)}, which the worlds do not measure; "
-                             f"build them with features={tuple(read)!r}")  # fmt: skip
-        self.worlds, self.layout, self.gamma = worlds, layout, layout.gamma
-        self._act_dim = 1 + int(layout.offsets[-1])
-        self._obs: np.ndarray | None = None
-        self._ran = np.full(worlds.num_envs, -1, dtype=np.int64)  # as MacroEnv._ran, per world
-
-    @property
-    def num_envs(self) -> int:
-        """N."""
-        return self.worlds.num_envs
-
-    @property
-    def names(self) -> list[str]:
-        """The macro-actions' names, in the order of the Manager's choices."""
-        return self.layout.names
-
-    @property
-    def obs_dim(self) -> int:
-        """Length of one observation (the low-level task's)."""
-        return self.worlds.obs_dim
-
-    @property
-    def act_dim(self) -> int:
-        """``1 + S``: the choice, then every parameter block."""
-        return self._act_dim
-
-    @property
-    def resumable(self) -> bool:
-        """Always: every world's state is saved exactly."""
-        return True
-
-    def reset(self, seed: int | None = None) -> np.ndarray:
-        """Reset every world (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
-        self._obs = self.worlds.reset(seed=seed)
-        self._ran[:] = -1
-        return self._obs.copy()
-
-    def step(self, actions: np.ndarray) -> VectorStep:
-        """One decision in every world from flat hierarchical actions ``[N, 1 + S]`` (checked by :func:`decide`);
-        restarts the worlds whose episode ended."""
-        if self._obs is None:
-            raise RuntimeError("BatchedMacroVectorEnv: call reset() before step()")
-        n, worlds = self.num_envs, self.worlds
-        last: dict[str, np.ndarray] = {}
-        success = np.zeros(n, dtype=bool)
-        full, mask = np.zeros((n, N_JOINTS)), np.zeros(n, dtype=bool)
-        seconds = 0.0
-
-        def step(running: np.ndarray, torques: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-            nonlocal seconds
-            full[:], mask[:] = 0.0, False
-            full[running], mask[running] = torques, True
-            out = worlds.advance(full, mask)
-            seconds += out.physics_seconds
-            for k, v in out.infos.items():
-                if k not in last:
-                    last[k] = np.zeros(n, dtype=bool) if v.dtype == bool else np.full(n, np.nan)
-                last[k][running] = v[running]
-            success[running] = out.success[running]
-            return out.next_obs[running], out.rewards[running], out.terminated[running], out.truncated[running]
-
-        def features(name: str, idx: np.ndarray) -> np.ndarray:
-            return worlds.features(name)[idx]
-
-        res = decide(self.layout.hierarchy, self._obs, actions, step, features, self._ran)
-        next_obs = res.obs
-        obs = next_obs.copy()
-        self._ran[:] = res.choice
-        ended = np.flatnonzero(res.terminated | res.truncated)
-        if ended.size:
-            obs[ended] = worlds.reset_worlds(ended)
-            self._ran[ended] = -1
-        self._obs = obs
-        infos = {**last, "task_reward": res.task_reward, "choice": res.choice, "skill_done": res.skill_done}
-        return VectorStep(obs=obs.copy(), next_obs=next_obs, rewards=res.rewards, discount=res.discount, tau=res.tau,
-                          terminated=res.terminated, truncated=res.truncated, success=success, infos=infos,
-                          physics_seconds=seconds)  # fmt: skip
-
-    def get_state(self) -> dict[str, Any]:
-        """:class:`MacroVectorEnv`'s format: ``{"envs": [{"env": world state, "obs": ...}], "obs": [N, obs_dim]}``."""
-        if self._obs is None:
-            raise RuntimeError("BatchedMacroVectorEnv: call reset() before get_state()")
-        worlds = self.worlds.get_state()["envs"]
-        return {"envs": [{"env": w, "obs": o, "ran": int(r)} for w, o, r in zip(worlds, self._obs.tolist(), self._ran,
-                                                                              strict=True)],
-                "obs": self._obs.tolist()}  # fmt: skip
-
-    def set_state(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`get_state` (or a :class:`MacroVectorEnv`'s of the same task)."""
-        if len(state["envs"]) != self.num_envs:
-            raise ValueError(f"BatchedMacroVectorEnv: the saved state has {len(state['envs'])} environments, this one "
-                             f"{self.num_envs}")  # fmt: skip
-        self.worlds.set_state({"envs": [s["env"] for s in state["envs"]]})
-        self._obs = np.asarray(state["obs"], dtype=np.float64).reshape(self.num_envs, self.obs_dim)
-        self._ran = np.array([int(s.get("ran", -1)) for s in state["envs"]], dtype=np.int64)
-
-    def close(self) -> None:
-        """Close the worlds and the layout's environment."""
-        self.worlds.close()
-        self.layout.close()

@@ -13,12 +13,14 @@ from typing import Any
 import gymnasium as gym
 
 from hrlp.arm.batched import VECTORISED, BatchedFactory, make_batched
+from hrlp.arm.handover import drive
+from hrlp.arm.manager import BatchedMacroVectorEnv
 from hrlp.arm.registry import TASKS, ArmEnvFactory, make, probe_task
 from hrlp.config import MacroSpec, TrainConfig, auto_workers
 from hrlp.envs.actions import NormalisedParameters, is_parameterised, make_normalised
 from hrlp.envs.check import gym_kwargs
 from hrlp.envs.vector import VectorConstructor, VectorEnv
-from hrlp.skills.macro_env import BatchedMacroVectorEnv, MacroEnv
+from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.sources import resolve_skills
 
 
@@ -76,7 +78,8 @@ class _MacroFactory:
             check_skill_hashes(self.hashes, skill_hashes(self._skills), Path("skill library"))
         low = gym.make(self.name, **self.kwargs) if self.gym_id else make(self.name, **self.kwargs)
         m = self.macro
-        return MacroEnv(low, self._skills, m.k, m.micro, self.gamma, m.handover, m.chain)
+        chain = m.chain or bool(m.handover and m.handover.initiation)
+        return MacroEnv(low, drive(self._skills, m.handover), m.k, m.micro, self.gamma, chain)
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_skills": None}

@@ -20,16 +20,16 @@ from pathlib import Path
 import numpy as np
 
 from hrlp.arm import make
+from hrlp.arm.research.scripted import ScriptedGrasp, ScriptedGraspConfig
+from hrlp.arm.skill import ArmSkill
 from hrlp.atomic import atomic_path
-from hrlp.skills.scripted import ScriptedGrasp, ScriptedGraspConfig
-from hrlp.skills.skill import Skill
 
 #: The Gripper task arguments of the shipped Gripper skill's training starts (the `shipped-skills` preset).
 GRIP_START_TASK_ARGS: dict[str, object] = {"start_distance": (0.0, 0.09), "finger_opening": (0.0, 1.0)}
 
 
 def record_grip_starts(
-    gripper: Skill | ScriptedGraspConfig,
+    gripper: ArmSkill | ScriptedGraspConfig,
     angle_range: float,
     states: int,
     *,
@@ -44,7 +44,7 @@ def record_grip_starts(
 
     Episodes start from the Gripper task's close, open-claw starts with the capsule's angle in
     ``[-angle_range, angle_range]``; a skill acts with its mean action, a :class:`ScriptedGraspConfig` stands for the
-    scripted grasp (:class:`~hrlp.skills.scripted.ScriptedGrasp`, one per environment): its states show a top-down
+    scripted grasp (:class:`~hrlp.arm.research.scripted.ScriptedGrasp`, one per environment): its states show a top-down
     approach and grip that a policy trained from them can start from (demonstration starts). Every ``every``-th state
     of an episode in which Definition 1 held at some step is kept, until ``states`` are collected; with ``held``, only
     those in which it holds (the capsule in the claw: the starts of a Mover that carries what a Gripper gripped).

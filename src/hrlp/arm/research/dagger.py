@@ -34,10 +34,11 @@ import numpy as np
 import torch
 
 from hrlp.arm.physics import N_JOINTS, ArmPhysics
+from hrlp.arm.research.starts import write_start_bank
+from hrlp.arm.skill_files import add_run
 from hrlp.arm.tasks import HANDOVER_BANK
 from hrlp.atomic import atomic_path
 from hrlp.skills.library import SkillLibrary, default_library_root, locate_skill, search_roots
-from hrlp.skills.starts import write_start_bank
 
 #: The tasks whose skills can be retrained from hand-over states (their task reads a start bank).
 RETRAINABLE_TASKS = frozenset({"Gripper"})
@@ -229,7 +230,7 @@ def run_round(cfg: DaggerConfig, out_dir: Path, console: Any = None) -> dict[str
     if cfg.name not in library.names():
         lineage = {"parent": cfg.skill, "parent_sha256": parent.content_hash, "manager_run": str(manager_run),
                    "states": cfg.states, "starts_fraction": cfg.starts_fraction, "round_dir": str(out_dir)}  # fmt: skip
-        library.add(skill_run, cfg.name, k=parent.k, lineage=lineage)
+        add_run(library, skill_run, cfg.name, k=parent.k, lineage=lineage)
         console.print(f"skill {cfg.name} added to {library.root}")
 
     skills = tuple(cfg.name if s == cfg.skill else s for s in manager_cfg.macro.skills)

@@ -1,6 +1,6 @@
 """Imitating the scripted grasp: behaviour cloning with DAgger relabelling into an ordinary flat Gripper run.
 
-Round 0 rolls the expert (:class:`~hrlp.skills.scripted.ScriptedGrasp`) out from the task's starts and records every
+Round 0 rolls the expert (:class:`~hrlp.arm.research.scripted.ScriptedGrasp`) out from the task's starts and records every
 state's observation with the expert's action. Each DAgger round (Ross et al., 2011) then rolls the current student out
 and labels the states *it* visits with the expert's actions, so the student learns to recover from its own mistakes;
 the student is refitted on everything gathered so far. Two standard refinements are options:
@@ -30,9 +30,9 @@ import torch
 
 from hrlp.arm.env import ArmEnv
 from hrlp.arm.registry import make
+from hrlp.arm.research.scripted import ScriptedGrasp, ScriptedGraspConfig
 from hrlp.atomic import writing
 from hrlp.config import TrainConfig
-from hrlp.skills.scripted import ScriptedGrasp, ScriptedGraspConfig
 
 __all__ = ["ImitationConfig", "collect", "fit_mean", "greedy_success", "imitate"]
 
@@ -64,10 +64,10 @@ class ImitationConfig:
     """In DAgger round r (1, 2, ...) the expert acts at each step with probability beta**r, else the student (0: the
     student alone, plain DAgger)."""
     expert_keep_clear: bool = True
-    """The expert's :attr:`hrlp.skills.scripted.ScriptedGraspConfig.keep_clear` (False: the first version's motion, from
+    """The expert's :attr:`hrlp.arm.research.scripted.ScriptedGraspConfig.keep_clear` (False: the first version's motion, from
     which the shipped ``gripper-imitated`` was imitated)."""
     expert_escape_clearance: float = 0.0
-    """The expert's :attr:`hrlp.skills.scripted.ScriptedGraspConfig.escape_clearance`, metres (0: no escape from tight
+    """The expert's :attr:`hrlp.arm.research.scripted.ScriptedGraspConfig.escape_clearance`, metres (0: no escape from tight
     starts, the expert the shipped ``gripper-claw`` was imitated from)."""
     eval_episodes: int = 0
     """If > 0, each round's student is evaluated greedily over this many episodes (seeds apart from the collected

@@ -19,8 +19,7 @@ import numpy as np
 from hrlp.arm.physics import BASE_OBS_DIM, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.skills.core import ObsView, ParamBox
-from hrlp.skills.core import Skill as GenericSkill
+from hrlp.skills.core import ObsView, ParamBox, Skill
 
 #: Named frames a parameter vector can be expressed in: the slice of the observation that holds the frame's origin
 #: (None for the world frame). A parameter in a body's frame is an offset from that body's position. 'hand' and
@@ -186,7 +185,7 @@ def _is_number(v: object) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool) and bool(np.isfinite(v))
 
 
-class Skill(GenericSkill):
+class ArmSkill(Skill):
     """A frozen arm skill: ``torques(base_obs [N, 24], params [N, dim], features [N, F]) -> [N, 9]`` (the policy's mean
     action); as a generic skill (:class:`hrlp.skills.core.Skill`) it reads the parts ``base`` and its features.
 
