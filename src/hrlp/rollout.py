@@ -4,7 +4,7 @@ Per-observation policy calls, not physics, are what make RL libraries slow on sm
 (shared/PERFORMANCE.md), so the sampler keeps ``N`` environments in one process and asks the
 policy for ``N`` actions at once. It sees them only as a :class:`~hrlp.envs.vector.VectorEnv`
 (one step record, same-step autoreset): ordinary Gymnasium environments (:class:`~hrlp.envs.vector.SerialVectorEnv`),
-a Manager's macro-action environments (:class:`~hrlp.skills.macro_env.MacroVectorEnv`, batched skill
+a Manager's macro-action environments (:class:`~hrlp.skills.macro_env.ManagerVectorEnv`, batched skill
 inference) or a batched physics backend (:class:`~hrlp.arm.batched.BatchedArmEnv`) go through the same
 loop, and every batch carries the per-decision discount (gamma for a flat step, gamma^tau for a
 macro-action of tau low-level steps). Time is accounted per phase (environment, inference) so a
@@ -30,7 +30,7 @@ from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorConstructor
 from hrlp.envs.vector import action_decoder as action_decoder  # re-exported: its home is hrlp.envs.vector
 from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.skills.macro_env import MacroEnv, MacroVectorEnv
+from hrlp.skills.macro_env import MacroEnv, manager_vector_env
 
 DEFAULT_GAMMA = 0.99
 """The discount of a flat step when none is given (:class:`hrlp.config.AdvantageConfig`'s default)."""
@@ -102,14 +102,14 @@ class Timing:
 
 def vector_env(envs: Sequence[gym.Env], gamma: float | None = None) -> VectorEnv:
     """The :class:`~hrlp.envs.vector.VectorEnv` that steps ``envs`` together: a
-    :class:`~hrlp.skills.macro_env.MacroVectorEnv` for a Manager's :class:`~hrlp.skills.macro_env.MacroEnv`s (their own
+    :class:`~hrlp.skills.macro_env.ManagerVectorEnv` for a Manager's :class:`~hrlp.skills.macro_env.MacroEnv`s (their own
     gamma; a different ``gamma`` is refused, since it would discount the decisions otherwise than inside them), else a
     :class:`~hrlp.envs.vector.SerialVectorEnv` with ``gamma`` per step (default :data:`DEFAULT_GAMMA`)."""
     macro = [isinstance(env, MacroEnv) for env in envs]
     if any(macro):
         if not all(macro):
             raise ValueError("vector_env: the environments mix MacroEnvs and other environments")
-        vec = MacroVectorEnv(envs)  # type: ignore[arg-type]
+        vec = manager_vector_env(envs)  # type: ignore[arg-type]
         if gamma is not None and gamma != vec.gamma:
             raise ValueError(f"vector_env: gamma {gamma} differs from the MacroEnvs' own ({vec.gamma})")
         return vec
@@ -119,7 +119,7 @@ def vector_env(envs: Sequence[gym.Env], gamma: float | None = None) -> VectorEnv
 def build_vector_env(env_fns: Sequence[Callable[[], gym.Env]], gamma: float | None = None) -> VectorEnv:
     """The :class:`~hrlp.envs.vector.VectorEnv` of ``env_fns``: the constructor's own when every one is the same
     :class:`~hrlp.envs.vector.VectorConstructor` (the batched backend of ``TrainConfig.backend``: a
-    :class:`~hrlp.arm.batched.BatchedArmEnv`, or a Manager's :class:`~hrlp.skills.macro_env.BatchedMacroVectorEnv`),
+    :class:`~hrlp.arm.batched.BatchedArmEnv`, or a Manager's :class:`~hrlp.skills.macro_env.ManagerVectorEnv` over one),
     else :func:`vector_env` of the environments they build."""
     first = env_fns[0]
     if isinstance(first, VectorConstructor) and all(fn is first for fn in env_fns):

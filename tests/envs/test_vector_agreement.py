@@ -2,9 +2,9 @@
 
 (a) SerialVectorEnv against its environments stepped by hand (Box, Discrete and parameterised actions); (b)
 BatchedArmEnv's loop backend against SerialVectorEnv bit for bit, its rollout backend within 1e-6 (it restarts the
-constraint solver's warm start every control step, tests/envs/test_batched.py); (c) MacroVectorEnv against each
-MacroEnv stepped alone with ``env.step``, and BatchedMacroVectorEnv (the Manager over a BatchedArmEnv) against
-MacroVectorEnv, bit for bit over the loop backend; (d) the Sampler over each of them, and against a per-environment loop
+constraint solver's warm start every control step, tests/envs/test_batched.py); (c) the serial ManagerVectorEnv against each
+MacroEnv stepped alone with ``env.step``, and the batched one (the Manager over a BatchedArmEnv) against
+the serial one, bit for bit over the loop backend; (d) the Sampler over each of them, and against a per-environment loop
 (``env.step`` one environment at a time, as the sampler did before it stepped a VectorEnv), for a fixed policy and
 seed. Batched skill inference evaluates a skill on ``[M, 24]`` rows where a lone MacroEnv evaluates it on one, and a
 matrix product may round differently: with skills the numbers agree to 1e-7, the flags and taus exactly; the
@@ -26,14 +26,14 @@ import torch
 from hrlp.algos.kernels import discounted_returns, gae
 from hrlp.arm import make
 from hrlp.arm.batched import make_batched
-from hrlp.arm.manager import BatchedMacroVectorEnv
+from hrlp.arm.manager import batched_manager
 from hrlp.config import MicroAction
 from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorEnv, VectorStep, action_decoder
 from hrlp.policies.mlp import policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import Batch, Episode, Sampler, vector_env
 from hrlp.skills.library import load_skill
-from hrlp.skills.macro_env import MacroEnv, MacroVectorEnv
+from hrlp.skills.macro_env import MacroEnv, ManagerVectorEnv, manager_vector_env
 
 TASK, N, EPISODE = "ReachAndGrip2", 3, 12
 LOOSE = {"tr1": 0.3, "tr2": 0.06}  # success within reach of random torques, so the success flags are compared both ways
@@ -135,7 +135,7 @@ def test_batched_arm_env_gives_the_serial_reference_episodes(backend):
     _same_steps(ref, got, 0.0 if backend == "loop" else ROLLOUT_ATOL)
 
 
-# --- (c) MacroVectorEnv against each MacroEnv stepped alone -----------------------------------------------------------
+# --- (c) the serial ManagerVectorEnv against each MacroEnv stepped alone ------------------------------------------------
 
 
 @pytest.fixture(scope="module")
@@ -170,7 +170,7 @@ def _blocks(env: MacroEnv, row: np.ndarray) -> tuple:
 @pytest.mark.parametrize("kind", ["skills", "micro"])
 def test_macro_vector_env_gives_each_macro_envs_own_episodes(skills, kind):
     build = _Managers(skills if kind == "skills" else None)
-    vec, alone = MacroVectorEnv([build() for _ in range(N)]), [build() for _ in range(N)]
+    vec, alone = manager_vector_env([build() for _ in range(N)]), [build() for _ in range(N)]
     rtol = SKILLS_RTOL if kind == "skills" else 0.0
     actions = _manager_actions(alone[0], 14)
     obs = vec.reset(seed=7)
@@ -195,16 +195,16 @@ def test_macro_vector_env_gives_each_macro_envs_own_episodes(skills, kind):
 
 def test_macro_vector_env_refuses_environments_of_different_managers(skills):
     with pytest.raises(ValueError, match="environment 1 has other macro-actions"):
-        MacroVectorEnv([_Managers(skills)(), _Managers(None)()])
+        manager_vector_env([_Managers(skills)(), _Managers(None)()])
     with pytest.raises(ValueError, match=r"gamma 0\.9 differs from the MacroEnvs' own"):
         vector_env([_Managers(None)()], gamma=0.9)
     with pytest.raises(ValueError, match="mix MacroEnvs and other environments"):
         vector_env([_Managers(None)(), _arm()()])
-    assert isinstance(MacroVectorEnv([_Managers(None)()]), VectorEnv)
+    assert isinstance(manager_vector_env([_Managers(None)()]), VectorEnv)
 
 
-def _batched_managers(build: _Managers, backend: str) -> BatchedMacroVectorEnv:
-    return BatchedMacroVectorEnv(make_batched(TASK, N, episode_steps=EPISODE, backend=backend, **LOOSE), build())
+def _batched_managers(build: _Managers, backend: str) -> ManagerVectorEnv:
+    return batched_manager(make_batched(TASK, N, episode_steps=EPISODE, backend=backend, **LOOSE), build())
 
 
 @pytest.mark.parametrize("backend", ["loop", "rollout"])
@@ -214,7 +214,7 @@ def test_batched_macro_vector_env_gives_the_macro_vector_envs_episodes(skills, k
     # loop backend the same bits; with rollout within its agreement with ArmEnv.
     build = _Managers(skills if kind == "skills" else None)
     actions = _manager_actions(build(), 14)
-    ref_obs, ref = _run(MacroVectorEnv([build() for _ in range(N)]), actions)
+    ref_obs, ref = _run(manager_vector_env([build() for _ in range(N)]), actions)
     obs, got = _run(_batched_managers(build, backend), actions)
     np.testing.assert_array_equal(obs, ref_obs)
     _same_steps(ref, got, 0.0 if backend == "loop" else ROLLOUT_ATOL)
@@ -224,7 +224,7 @@ def test_batched_macro_vector_env_gives_the_macro_vector_envs_episodes(skills, k
 def test_a_managers_state_continues_from_one_vector_env_in_the_other(skills):
     build = _Managers(skills)
     actions = _manager_actions(build(), 10)
-    serial, batched = MacroVectorEnv([build() for _ in range(N)]), _batched_managers(build, "loop")
+    serial, batched = manager_vector_env([build() for _ in range(N)]), _batched_managers(build, "loop")
     _run(serial, actions[:5])
     _run(batched, actions[:5], seed=99)  # elsewhere, until it takes the serial one's state
     batched.set_state(json.loads(json.dumps(serial.get_state())))
@@ -235,7 +235,7 @@ def test_a_managers_state_continues_from_one_vector_env_in_the_other(skills):
 def test_a_batched_manager_refuses_worlds_of_another_task(skills):
     worlds = make_batched("Reacher", N, episode_steps=EPISODE)
     with pytest.raises(ValueError, match="the worlds run ReacherTask, the layout's macro-actions ReachAndGripTask"):
-        BatchedMacroVectorEnv(worlds, _Managers(skills)())
+        batched_manager(worlds, _Managers(skills)())
     assert isinstance(_batched_managers(_Managers(None), "loop"), VectorEnv)
 
 
@@ -337,7 +337,7 @@ def test_the_sampler_gives_a_managers_batch_as_its_environments_step_alone(skill
     policy = _policy(fns[0]())
     ref, ref_eps = _per_env_batch(fns, policy, seed, steps, gamma=math.nan)
     from_fns = Sampler(fns, policy, RunningNormalizer(24), seed=seed, gamma=0.95)
-    ready = Sampler(MacroVectorEnv([fn() for fn in fns]), policy, RunningNormalizer(24), seed=seed)
+    ready = Sampler(manager_vector_env([fn() for fn in fns]), policy, RunningNormalizer(24), seed=seed)
     for sampler in (from_fns, ready):
         batch, eps = sampler.collect(steps)
         if kind == "micro":  # no network between the decision and the torques: bit for bit

@@ -15,11 +15,11 @@ import pytest
 
 from hrlp.arm import make
 from hrlp.arm.batched import make_batched
-from hrlp.arm.manager import BatchedMacroVectorEnv
+from hrlp.arm.manager import batched_manager
 from hrlp.arm.skill_files import add_run
 from hrlp.config import MacroSpec
 from hrlp.skills import SkillLibrary
-from hrlp.skills.macro_env import MacroEnv, MacroVectorEnv
+from hrlp.skills.macro_env import MacroEnv, manager_vector_env
 from hrlp.train import TrainConfig, load_policy, train
 
 SEEING = {"observe_capsule": True, "observe_claw": True, "observe_clearance": True}
@@ -94,8 +94,8 @@ def test_the_batched_manager_gives_the_skill_the_same_features_after_every_reset
     # pose of the new start (a batched world's sensors are refreshed when it is reset).
     skill = seeing[1].load("seeing")
     layout = MacroEnv(make("Gripper", episode_steps=EPISODE), [skill], k=K)
-    serial = MacroVectorEnv([MacroEnv(make("Gripper", episode_steps=EPISODE), [skill], k=K) for _ in range(N)])
-    batched = BatchedMacroVectorEnv(make_batched("Gripper", N, episode_steps=EPISODE, backend=backend, features=FEATURES),
+    serial = manager_vector_env([MacroEnv(make("Gripper", episode_steps=EPISODE), [skill], k=K) for _ in range(N)])
+    batched = batched_manager(make_batched("Gripper", N, episode_steps=EPISODE, backend=backend, features=FEATURES),
                                     layout)  # fmt: skip
     np.testing.assert_array_equal(serial.reset(seed=7), batched.reset(seed=7))
     atol = 1e-7 if backend == "loop" else 1e-6
@@ -116,7 +116,7 @@ def test_batched_worlds_without_the_clearance_sensors_are_refused_for_a_skill_th
     assert plain.measured_features == ("capsule_pose", "claw_pose")
     with pytest.raises(ValueError, match=r"the skills read arm_clearance, which the worlds do not measure; build them with "
                                          r"features=\('capsule_pose', 'claw_pose', 'arm_clearance'\)"):  # fmt: skip
-        BatchedMacroVectorEnv(plain, layout)
+        batched_manager(plain, layout)
     with pytest.raises(ValueError, match="unknown observation feature"):
         make_batched("Gripper", N, features=("arm_distance",))
 

@@ -85,6 +85,27 @@ def test_a_skill_that_says_it_is_done_ends_its_macro_action_early_and_reports_it
     assert (info["tau"] == 10 or term) and not info["skill_done"]
 
 
+def test_a_scripted_skill_keeps_per_world_state_from_its_entry_hook():
+    starts: dict[int, np.ndarray] = {}
+
+    def begin(obs: ObsView, params: np.ndarray) -> None:
+        starts.update({int(i): row.copy() for i, row in zip(obs.idx, obs["achieved_goal"], strict=True)})
+
+    def moved(obs: ObsView, params: np.ndarray) -> np.ndarray:
+        return np.array(
+            [np.linalg.norm(r - starts[int(i)]) >= 0.15 for i, r in zip(obs.idx, obs["achieved_goal"], strict=True)]
+        )
+
+    skill = ScriptedSkill("move", ParamBox.of([-1, -1], [1, 1]), lambda o, p: p, reads=("achieved_goal",), k=10,
+                          begin=begin, done=moved)  # fmt: skip
+    macro = MacroEnv(gym.make(TASK), [skill], gamma=1.0)
+    obs, _ = macro.reset(seed=3)
+    towards_centre = -np.sign(obs[macro.layout.span("achieved_goal")][:1])
+    _, _, term, _, info = macro.step((0, np.array([towards_centre[0], 0.0])))  # 10 cm a step: 15 cm after the second
+    assert (info["tau"] == 2 and info["skill_done"]) or term, info
+    assert list(starts) == [0]
+
+
 def test_parameters_in_a_frame_are_offsets_from_the_named_part_at_the_decision_start():
     macro = MacroEnv(gym.make(TASK), [goal_envs.near_goal])
     obs, _ = macro.reset(seed=2)

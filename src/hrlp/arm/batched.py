@@ -623,7 +623,7 @@ class BatchedArmEnv:
         whose episode ends here waits, ``obs`` its last observation, until :meth:`reset_worlds` starts its next one
         (stepping it before raises RuntimeError). Rows of worlds not active hold their current observation, reward 0
         and no flags; their ``infos`` are not meaningful. A Manager's macro-actions of different lengths step this way
-        (:class:`~hrlp.skills.macro_env.BatchedMacroVectorEnv`)."""
+        (:class:`~hrlp.skills.macro_env.ManagerVectorEnv`)."""
         if not self._ready:
             raise RuntimeError(f"{self._who}: call reset() before step()")
         a = check_actions(actions, self._n, N_JOINTS, self._who)
@@ -685,6 +685,15 @@ class BatchedArmEnv:
         """The named observation features :meth:`features` gives (``arm_clearance`` only where these worlds were built
         with its distance sensors: the task observes it, or ``features`` named it)."""
         return tuple(f for f in OBS_FEATURES if f != "arm_clearance" or self._clearance)
+
+    @property
+    def measurable(self) -> tuple[str, ...]:
+        """Parts measured outside the observation (:meth:`measure`): :attr:`measured_features`."""
+        return self.measured_features
+
+    def measure(self, name: str, worlds: np.ndarray) -> np.ndarray:
+        """The named feature of the worlds ``worlds``."""
+        return self.features(name)[worlds]
 
     def features(self, name: str) -> np.ndarray:
         """The named observation feature (:data:`~hrlp.arm.physics.OBS_FEATURES`) of every world's current state,

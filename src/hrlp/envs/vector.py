@@ -4,7 +4,7 @@ A :class:`VectorEnv` steps ``N`` environments together: ``reset(seed) -> obs [N,
 ``step(actions [N, act_dim]) -> VectorStep``. The sampler (:class:`hrlp.rollout.Sampler`) sees only this protocol,
 whether the ``N`` environments are ordinary Gymnasium environments stepped one by one (:class:`SerialVectorEnv`, the
 reference implementation here), hrlp's batched MuJoCo backend (:class:`hrlp.arm.batched.BatchedArmEnv`), a
-Manager's macro-action environments (:class:`hrlp.skills.macro_env.MacroVectorEnv`) or, later, a GPU backend.
+Manager's macro-action environments (:class:`hrlp.skills.macro_env.ManagerVectorEnv`) or, later, a GPU backend.
 
 Actions are flat float rows: a Box action as it is, a Discrete one as one number, a parameterised
 ``Tuple(Discrete(n), Box(d_1), ..., Box(d_n))`` one as ``[k, u_1, ..., u_n]`` (the policy's encoding);

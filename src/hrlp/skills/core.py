@@ -236,7 +236,8 @@ class Skill:
 
 class ScriptedSkill(Skill):
     """A skill from plain functions (a scripted controller): ``policy(obs: ObsView, params [M, d]) -> [M, A]``, and
-    optional ``initiable(obs) -> [M]`` and ``done(obs, params) -> [M]``.
+    optional ``initiable(obs) -> [M]``, ``done(obs, params) -> [M]`` and ``begin(obs, params)`` (called as worlds
+    ``obs.idx`` start the skill: keep per-world state by ``obs.idx``, e.g. where each started).
 
     >>> reach = ScriptedSkill("reach", ParamBox.of([-1, -1], [1, 1]), lambda o, p: 5 * (p - o["achieved_goal"]),
     ...                       reads=("achieved_goal",), k=10)
@@ -245,11 +246,17 @@ class ScriptedSkill(Skill):
     def __init__(self, name: str, params: ParamBox, policy: Callable[[ObsView, np.ndarray], np.ndarray], *,
                  reads: Sequence[str] = (), k: int = 10,
                  initiable: Callable[[ObsView], np.ndarray] | None = None,
-                 done: Callable[[ObsView, np.ndarray], np.ndarray] | None = None) -> None:  # fmt: skip
+                 done: Callable[[ObsView, np.ndarray], np.ndarray] | None = None,
+                 begin: Callable[[ObsView, np.ndarray], object] | None = None) -> None:  # fmt: skip
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
             raise ValueError(f"skill {name}: k must be a positive integer, got {k!r}")
         self.name, self.params, self.k, self.reads = str(name), params, k, tuple(reads)
-        self._policy, self._initiable, self._done = policy, initiable, done
+        self._policy, self._initiable, self._done, self._begin = policy, initiable, done, begin
+        self.has_done = done is not None  # decide() skips the done test of a skill that has none
+
+    def begin(self, obs: ObsView, params: np.ndarray) -> None:
+        if self._begin is not None:
+            self._begin(obs, params)
 
     def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
         return np.asarray(self._policy(obs, params), dtype=np.float64).reshape(len(obs), -1)
@@ -345,8 +352,9 @@ class Hierarchy:
 
     @property
     def ending(self) -> tuple[bool, ...]:
-        """Whether each skill has a done test of its own (the others run their ``k`` steps, untested)."""
-        return tuple(type(s).done is not Skill.done for s in self.skills)
+        """Whether each skill has a done test of its own (the others run their ``k`` steps, untested): its
+        ``has_done`` where it says, else whether it overrides :meth:`Skill.done`."""
+        return tuple(bool(getattr(s, "has_done", type(s).done is not Skill.done)) for s in self.skills)
 
 
 def initiated(skills: Sequence[Skill], obs: ObsView, choice: np.ndarray, ran: np.ndarray | None = None) -> np.ndarray:

@@ -14,23 +14,23 @@ tau low-level steps returns the discounted in-macro reward ``sum_j gamma^j r_j``
 ``info['discount'] = gamma^tau``, the factor the Manager's return and advantage estimator apply
 to the next decision (semi-Markov discounting).
 
-:func:`step_macros` runs one decision in each of ``N`` environments together, so every
-low-level step evaluates each skill once for all the environments running it (batched skill
-inference); :class:`MacroVectorEnv` is the :class:`~hrlp.envs.vector.VectorEnv` built on it, the
-one the sampler steps a Manager's environments through.
+:class:`ManagerVectorEnv` is the :class:`~hrlp.envs.vector.VectorEnv` of a Manager's ``N`` environments over any
+backend's :class:`Worlds` (any Gymnasium environments through :class:`SerialWorlds`, the arm's batched physics): every
+low-level step evaluates each skill once for all the worlds running it (batched skill inference). :func:`step_macros`
+runs one decision of a few :class:`MacroEnv` the same way.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
 
 from hrlp.config import MicroAction
-from hrlp.envs.vector import VectorStep, check_num_envs, info_arrays, info_success, physics_seconds
+from hrlp.envs.vector import NO_SUCCESS_TEST, VectorStep, check_num_envs, info_arrays, info_success, physics_seconds
 from hrlp.skills.core import DirectControl, Hierarchy, MacroStep, ObsLayout, ObsView, ParamBox, Skill, decide, initiated
 
 
@@ -198,75 +198,80 @@ class MacroEnv(gym.Env):
 
 
 def step_macros(envs: Sequence[MacroEnv], actions: np.ndarray) -> MacroStep:
-    """Run one Manager decision in each of ``N`` environments that share their skills, in lockstep.
+    """Run one Manager decision in each of ``N`` environments that share their skills, in lockstep, without resetting
+    the ones whose episode ends (:meth:`ManagerVectorEnv.decision` over :class:`SerialWorlds`).
 
     ``actions`` are flat hierarchical actions ``[N, 1 + S]``: the choice, then every parameter block (values
     in [-1, 1]; clipped). At every low-level step each skill is evaluated once, on the ``M`` environments running it,
     and an environment whose macro-action has ended (its duration, its done test, or its episode) waits
-    (:func:`~hrlp.skills.core.decide`). Raises ValueError for a wrong shape, NaN/inf, or a choice that is not one of
-    the macro-actions.
+    (:func:`~hrlp.skills.core.decide`). ``infos`` are each environment's last low-level info. Raises ValueError for a
+    wrong shape, NaN/inf, or a choice that is not one of the macro-actions.
     """
-    infos: list[dict[str, Any]] = [{} for _ in envs]
-    runs: list[int] | None = None  # the macro-actions run, for on_substep's labels
-
-    def step(running: np.ndarray, torques: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        nonlocal runs
-        rows = []
-        for i, t in zip(running, torques, strict=True):
-            env = envs[i]
-            o, r, term, trunc, info = env.env.step(t)
-            rows.append((env.observe(o), r, term, trunc))
-            infos[i] = info
-            if env.on_substep is not None:
-                if runs is None:  # decide() has checked the actions; the envs are still at the decision's start
-                    runs = [e.would_run(int(a[0])) for e, a in zip(envs, np.asarray(actions), strict=True)]
-                env.on_substep(env.names[runs[i]])
-        obs, r, term, trunc = zip(*rows, strict=True)
-        return np.stack(obs), np.array(r, dtype=np.float64), np.array(term, dtype=bool), np.array(trunc, dtype=bool)
-
-    def measure(name: str, idx: np.ndarray) -> np.ndarray:
-        return np.stack([envs[i].env.unwrapped.measure(name) for i in idx])  # type: ignore[attr-defined]
-
-    ran = np.array([e._ran for e in envs], dtype=np.int64)
-    res = decide(envs[0].hierarchy, np.stack([e._obs for e in envs]), actions, step, measure, ran)
+    worlds = SerialWorlds(envs)
+    vec = ManagerVectorEnv(worlds, envs[0], on_substep=[e.on_substep for e in envs])
+    vec._obs = np.stack([e._obs for e in envs]).astype(np.float64)
+    vec._ran = np.array([e._ran for e in envs], dtype=np.int64)
+    res, _, _, _ = vec.decision(actions)
     for e, o, c in zip(envs, res.obs, res.choice, strict=True):
         e._obs, e._ran = o.copy(), int(c)
-    return dataclasses.replace(res, infos=infos)
+    return dataclasses.replace(res, infos=worlds.last_infos)
 
 
-class MacroVectorEnv:
-    """``N`` Manager environments as one :class:`~hrlp.envs.vector.VectorEnv`: a step is one decision in each, run by
-    :func:`step_macros` (batched skill inference), with same-step autoreset (:mod:`hrlp.envs.vector`).
+class Worlds(Protocol):
+    """``N`` worlds a Manager steps one low-level step at a time, the worlds whose macro-action has ended waiting: the
+    seam between :class:`ManagerVectorEnv` and a backend (:class:`SerialWorlds` for any Gymnasium environments, the
+    arm's batched :class:`~hrlp.arm.batched.BatchedArmEnv`)."""
 
-    Args:
-        envs: :class:`MacroEnv`s over the same skills, durations, micro-action and gamma (the Manager's environments
-            of one run); they are reset and stepped by this object from now on.
+    @property
+    def num_envs(self) -> int:
+        """N."""
+        ...
 
-    A step maps :class:`MacroStep` onto :class:`~hrlp.envs.vector.VectorStep`: ``rewards`` the discounted in-macro
-    reward ``sum_j gamma^j r_j``, ``discount = gamma^tau``, ``tau`` the low-level steps taken; ``next_obs`` the state
-    after the macro-action (an ended episode's real last observation), ``obs`` the reset one where an episode ended.
-    ``infos`` holds the scalar values of each environment's last low-level info (:func:`~hrlp.envs.vector.info_arrays`),
-    ``task_reward`` (the undiscounted sum of the task's rewards, what an episode's return counts) and ``choice`` (the
-    macro-action run); ``success`` is the last low-level ``info['success']``. :meth:`get_state` is
-    ``{"envs": [MacroEnv.get_state() per environment], "obs": [N, obs_dim]}``.
-    """
+    @property
+    def measurable(self) -> tuple[str, ...]:
+        """Parts measured outside the observation (:meth:`measure`)."""
+        ...
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Start every world's episode (world ``i`` seeded with ``seed + i``); ``obs [N, obs_dim]``."""
+        ...
+
+    def advance(self, actions: np.ndarray, active: np.ndarray | None = None) -> VectorStep:
+        """One low-level step of the worlds where ``active [N]``; the rows of the others are not meaningful, and a world
+        whose episode ends waits until :meth:`reset_worlds`."""
+        ...
+
+    def reset_worlds(self, worlds: np.ndarray) -> np.ndarray:
+        """Start the next episode of the worlds ``worlds``; their observations ``[M, obs_dim]``."""
+        ...
+
+    def measure(self, name: str, worlds: np.ndarray) -> np.ndarray:
+        """Part ``name`` of the worlds ``worlds`` in their current state, ``[M, width]``."""
+        ...
+
+    def get_state(self) -> dict[str, Any]:
+        """``{"envs": [one state per world]}``, JSON-serialisable."""
+        ...
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`get_state`."""
+        ...
+
+    def close(self) -> None:
+        """Release the worlds."""
+        ...
+
+
+class SerialWorlds:
+    """The low-level environments of ``N`` :class:`MacroEnv` as :class:`Worlds`: each stepped on its own, its
+    observation flattened as its Manager sees it (:meth:`MacroEnv.observe`), parts outside the observation from its
+    ``measure(name)``. ``last_infos`` holds each environment's last low-level info."""
 
     def __init__(self, envs: Sequence[MacroEnv]) -> None:
         self.envs = list(envs)
-        check_num_envs(len(self.envs), "MacroVectorEnv")
-        first = self.envs[0]
-        for i, e in enumerate(self.envs):
-            if not isinstance(e, MacroEnv):
-                raise ValueError(f"MacroVectorEnv: environment {i} is a {type(e).__name__}, not a MacroEnv")
-            same = (e.names == first.names and np.array_equal(e.durations, first.durations)
-                    and e.param_dims == first.param_dims and e.gamma == first.gamma)  # fmt: skip
-            if not same:
-                raise ValueError(f"MacroVectorEnv: environment {i} has other macro-actions, durations or gamma than "
-                                 "environment 0; the environments of one Manager must share them")  # fmt: skip
-        self.gamma = first.gamma
-        self._obs_dim = int(np.prod(first.observation_space.shape))
-        self._act_dim = 1 + int(first.offsets[-1])
-        self._obs: np.ndarray | None = None
+        check_num_envs(len(self.envs), "SerialWorlds")
+        self.last_infos: list[dict[str, Any]] = [{} for _ in self.envs]
+        self.measurable = tuple(getattr(self.envs[0].env.unwrapped, "measurable", ()))
 
     @property
     def num_envs(self) -> int:
@@ -274,77 +279,225 @@ class MacroVectorEnv:
         return len(self.envs)
 
     @property
+    def resumable(self) -> bool:
+        """Whether every environment can save its exact state (hrlp's arm tasks can; most Gymnasium ids not)."""
+        return all(e.resumable for e in self.envs)
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Reset every environment (``i`` with ``seed + i``)."""
+        return np.stack([e.reset(seed=None if seed is None else seed + i)[0] for i, e in enumerate(self.envs)])
+
+    def advance(self, actions: np.ndarray, active: np.ndarray | None = None) -> VectorStep:
+        """Step the environments where ``active``, one after another, in index order."""
+        n = self.num_envs
+        idx = np.arange(n) if active is None else np.flatnonzero(active)
+        envs = [self.envs[i] for i in idx]
+        physics0 = physics_seconds([e.env for e in envs])
+        next_obs = np.zeros((n, self.envs[0].layout.dim))
+        rewards = np.zeros(n)
+        terminated, truncated, success = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+        infos: list[Mapping[str, Any]] = [{} for _ in range(n)]
+        for i, e in zip(idx, envs, strict=True):
+            o, r, term, trunc, info = e.env.step(actions[i])
+            next_obs[i], rewards[i] = e.observe(o), r
+            terminated[i], truncated[i] = term, trunc and not term
+            success[i] = bool(info_success(info))
+            infos[i] = self.last_infos[i] = info
+        arrays = info_arrays(infos)
+        silent = np.array([info_success(infos[i]) is None for i in range(n)]) & np.isin(np.arange(n), idx)
+        if silent.any():
+            arrays[NO_SUCCESS_TEST] = silent
+        return VectorStep(obs=next_obs, next_obs=next_obs, rewards=rewards, discount=np.ones(n), tau=np.ones(n, np.int64),
+                          terminated=terminated, truncated=truncated, success=success, infos=arrays,
+                          physics_seconds=physics_seconds([e.env for e in envs]) - physics0)  # fmt: skip
+
+    def reset_worlds(self, worlds: np.ndarray) -> np.ndarray:
+        """Reset the environments ``worlds`` (each continuing its own random stream)."""
+        return np.stack([self.envs[i].reset()[0] for i in worlds])
+
+    def measure(self, name: str, worlds: np.ndarray) -> np.ndarray:
+        """Each environment's ``measure(name)``."""
+        return np.stack([self.envs[i].env.unwrapped.measure(name) for i in worlds])  # type: ignore[attr-defined]
+
+    def get_state(self) -> dict[str, Any]:
+        """Each environment's exact state (its ``get_state()``)."""
+        return {"envs": [e.env.unwrapped.get_state() for e in self.envs]}  # type: ignore[attr-defined]
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`get_state`."""
+        for e, s in zip(self.envs, state["envs"], strict=True):
+            e.env.unwrapped.set_state(s)  # type: ignore[attr-defined]
+
+    def close(self) -> None:
+        """Close every environment."""
+        for e in self.envs:
+            e.close()
+
+
+class ManagerVectorEnv:
+    """A Manager's ``N`` environments as one :class:`~hrlp.envs.vector.VectorEnv` over any :class:`Worlds`: a step is
+    one decision in every world (:func:`~hrlp.skills.core.decide`: batched skill inference, the worlds whose
+    macro-action has ended waiting), with same-step autoreset (:mod:`hrlp.envs.vector`). One class for every backend:
+    :class:`SerialWorlds` of any Gymnasium environments, or the arm's batched physics.
+
+    Args:
+        worlds: the ``N`` worlds; this object resets and steps them from now on.
+        layout: a :class:`MacroEnv` of the same environment giving the macro-actions (skills, durations, parameter
+            blocks, gamma, the observation's parts); its own environment is not stepped (unless it is one of the
+            worlds').
+        on_substep: per world, called with the running macro-action's name after each of its low-level steps
+            (rendering labels its frames so), or None.
+
+    A step maps :class:`~hrlp.skills.core.MacroStep` onto :class:`~hrlp.envs.vector.VectorStep`: ``rewards`` the
+    discounted in-macro reward ``sum_j gamma^j r_j``, ``discount = gamma^tau``, ``tau`` the low-level steps taken;
+    ``next_obs`` the state after the macro-action (an ended episode's real last observation), ``obs`` the reset one
+    where an episode ended. ``infos`` holds each world's last low-level values of its environment's scalar infos,
+    ``task_reward`` (the undiscounted sum of the task's rewards, what an episode's return counts), ``choice`` (the
+    macro-action run) and ``skill_done`` (it ended by its done test); ``success`` is the environment's own success test
+    at its last low-level step. :meth:`get_state` is ``{"envs": [{"env": world state, "obs": [obs_dim], "ran": int}],
+    "obs": [N, obs_dim]}``.
+    """
+
+    def __init__(self, worlds: Worlds, layout: MacroEnv,
+                 on_substep: Sequence[Callable[[str], None] | None] | None = None) -> None:  # fmt: skip
+        if not isinstance(layout, MacroEnv):
+            raise ValueError(f"ManagerVectorEnv: the layout must be a MacroEnv, got {type(layout).__name__}")
+        h = layout.hierarchy
+        measured = set(worlds.measurable)
+        read = dict.fromkeys(p for s in h.skills for p in s.reads if p not in h.layout.names)
+        if missing := [p for p in read if p not in measured]:
+            raise ValueError(f"ManagerVectorEnv: the skills read {', '.join(missing)}, which the worlds do not measure; "
+                             f"build them with features={tuple(read)!r}")  # fmt: skip
+        self.worlds, self.layout, self.hierarchy, self.gamma = worlds, layout, h, layout.gamma
+        self._on_substep = list(on_substep) if on_substep is not None else [None] * worlds.num_envs
+        self._obs: np.ndarray | None = None
+        self._ran = np.full(worlds.num_envs, -1, dtype=np.int64)  # the macro-action each world's last decision ran
+
+    @property
+    def num_envs(self) -> int:
+        """N."""
+        return self.worlds.num_envs
+
+    @property
     def names(self) -> list[str]:
         """The macro-actions' names, in the order of the Manager's choices."""
-        return self.envs[0].names
+        return self.hierarchy.names
 
     @property
     def obs_dim(self) -> int:
-        """Length of one observation (the low-level task's)."""
-        return self._obs_dim
+        """Length of one observation (the environment's, flattened)."""
+        return self.hierarchy.layout.dim
 
     @property
     def act_dim(self) -> int:
         """``1 + S``: the choice, then every parameter block."""
-        return self._act_dim
+        return self.hierarchy.act_dim
 
     @property
     def resumable(self) -> bool:
-        """Whether every MacroEnv can save its low-level environment's exact state (hrlp's arm tasks can)."""
-        return all(e.resumable for e in self.envs)
+        """Whether the worlds can save their exact state."""
+        return bool(getattr(self.worlds, "resumable", True))
 
     def reset(self, seed: int | None = None) -> np.ndarray:
-        """Reset every environment (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
-        obs = [env.reset(seed=None if seed is None else seed + i)[0] for i, env in enumerate(self.envs)]
-        self._obs = np.stack(obs).astype(np.float64).reshape(self.num_envs, self._obs_dim)
+        """Reset every world (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
+        self._obs = np.asarray(self.worlds.reset(seed=seed), dtype=np.float64).reshape(self.num_envs, self.obs_dim)
+        self._ran[:] = -1
         return self._obs.copy()
 
-    def step(self, actions: np.ndarray) -> VectorStep:
-        """One decision in every environment from flat hierarchical actions ``[N, 1 + S]`` (checked by
-        :func:`step_macros`); resets those whose episode ended."""
+    def decision(self, actions: np.ndarray) -> tuple[MacroStep, dict[str, np.ndarray], np.ndarray, float]:
+        """One decision in every world from the current observations, without resets: the :class:`MacroStep`, the
+        worlds' last low-level infos as arrays, their success, and the seconds spent in physics."""
         if self._obs is None:
-            raise RuntimeError("MacroVectorEnv: call reset() before step()")
-        physics0 = physics_seconds(self.envs)
-        res = step_macros(self.envs, actions)
-        next_obs = np.asarray(res.obs, dtype=np.float64).reshape(self.num_envs, self._obs_dim)
+            raise RuntimeError("ManagerVectorEnv: call reset() before step()")
+        n, h, worlds = self.num_envs, self.hierarchy, self.worlds
+        last: dict[str, np.ndarray] = {}
+        success = np.zeros(n, dtype=bool)
+        full, mask = np.zeros((n, h.action_dim)), np.zeros(n, dtype=bool)
+        seconds = 0.0
+        labels = self._labels(actions) if any(f is not None for f in self._on_substep) else None
+
+        def step(running: np.ndarray, lows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            nonlocal seconds
+            full[:], mask[:] = 0.0, False
+            full[running], mask[running] = lows, True
+            out = worlds.advance(full, mask)
+            seconds += out.physics_seconds
+            for k, v in out.infos.items():
+                if k not in last:
+                    last[k] = np.zeros(n, dtype=bool) if v.dtype == bool else np.full(n, np.nan)
+                last[k][running] = v[running]
+            success[running] = out.success[running]
+            if labels is not None:
+                for i in running:
+                    if (f := self._on_substep[i]) is not None:
+                        f(labels[i])
+            return out.next_obs[running], out.rewards[running], out.terminated[running], out.truncated[running]
+
+        res = decide(h, self._obs, actions, step, worlds.measure, self._ran)
+        return res, last, success, seconds
+
+    def _labels(self, actions: np.ndarray) -> list[str]:
+        """The name of the macro-action each world's decision runs (its choice, or under initiation sets the one
+        :func:`~hrlp.skills.core.initiated` picks), for ``on_substep``."""
+        assert self._obs is not None
+        choice = np.asarray(actions, dtype=np.float64)[:, 0].astype(np.int64)
+        if self.hierarchy.chain:
+            view = ObsView(self._obs, self.hierarchy.layout, np.arange(self.num_envs), self.worlds.measure)
+            choice = initiated(self.hierarchy.skills, view, choice, self._ran)
+        return [self.names[int(c)] for c in choice]
+
+    def step(self, actions: np.ndarray) -> VectorStep:
+        """One decision in every world from flat hierarchical actions ``[N, 1 + S]`` (checked by
+        :func:`~hrlp.skills.core.decide`); restarts the worlds whose episode ended."""
+        res, last, success, seconds = self.decision(actions)
+        next_obs = res.obs
         obs = next_obs.copy()
-        for i in np.flatnonzero(res.terminated | res.truncated):
-            obs[i] = np.ravel(self.envs[i].reset()[0])
-        physics = physics_seconds(self.envs) - physics0
+        self._ran[:] = res.choice
+        ended = np.flatnonzero(res.terminated | res.truncated)
+        if ended.size:
+            obs[ended] = self.worlds.reset_worlds(ended)
+            self._ran[ended] = -1
         self._obs = obs
-        infos = info_arrays(res.infos)
-        infos["task_reward"] = res.task_reward
-        infos["choice"] = res.choice
-        infos["skill_done"] = res.skill_done
-        return VectorStep(
-            obs=obs.copy(),
-            next_obs=next_obs,
-            rewards=res.rewards,
-            discount=res.discount,
-            tau=res.tau,
-            terminated=res.terminated,
-            truncated=res.truncated,
-            success=np.array([bool(info_success(info)) for info in res.infos]),
-            infos=infos,
-            physics_seconds=physics,
-        )
+        infos = {**last, "task_reward": res.task_reward, "choice": res.choice, "skill_done": res.skill_done}
+        return VectorStep(obs=obs.copy(), next_obs=next_obs, rewards=res.rewards, discount=res.discount, tau=res.tau,
+                          terminated=res.terminated, truncated=res.truncated, success=success, infos=infos,
+                          physics_seconds=seconds)  # fmt: skip
 
     def get_state(self) -> dict[str, Any]:
-        """Each environment's :meth:`MacroEnv.get_state` and the current observations (JSON-serialisable)."""
+        """``{"envs": [{"env": world state, "obs": ..., "ran": ...}], "obs": [N, obs_dim]}``."""
         if self._obs is None:
-            raise RuntimeError("MacroVectorEnv: call reset() before get_state()")
-        return {"envs": [env.get_state() for env in self.envs], "obs": self._obs.tolist()}
+            raise RuntimeError("ManagerVectorEnv: call reset() before get_state()")
+        worlds = self.worlds.get_state()["envs"]
+        return {"envs": [{"env": w, "obs": o, "ran": int(r)} for w, o, r in zip(worlds, self._obs.tolist(), self._ran,
+                                                                              strict=True)],
+                "obs": self._obs.tolist()}  # fmt: skip
 
     def set_state(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`get_state`."""
+        """Restore :meth:`get_state` (a state saved before ``ran`` was recorded: none yet)."""
         if len(state["envs"]) != self.num_envs:
-            raise ValueError(f"MacroVectorEnv: the saved state has {len(state['envs'])} environments, this one "
+            raise ValueError(f"ManagerVectorEnv: the saved state has {len(state['envs'])} environments, this one "
                              f"{self.num_envs}")  # fmt: skip
-        for env, s in zip(self.envs, state["envs"], strict=True):
-            env.set_state(s)
-        self._obs = np.asarray(state["obs"], dtype=np.float64).reshape(self.num_envs, self._obs_dim)
+        self.worlds.set_state({"envs": [s["env"] for s in state["envs"]]})
+        self._obs = np.asarray(state["obs"], dtype=np.float64).reshape(self.num_envs, self.obs_dim)
+        self._ran = np.array([int(s.get("ran", -1)) for s in state["envs"]], dtype=np.int64)
 
     def close(self) -> None:
-        """Close every environment."""
-        for env in self.envs:
-            env.close()
+        """Close the worlds and the layout's environment."""
+        self.worlds.close()
+        self.layout.close()
+
+
+def manager_vector_env(envs: Sequence[MacroEnv]) -> ManagerVectorEnv:
+    """``N`` :class:`MacroEnv` of one Manager stepped together (:class:`SerialWorlds`); a one-line ValueError for
+    environments whose macro-actions, durations or gamma differ."""
+    check_num_envs(len(envs), "manager_vector_env")
+    first = envs[0]
+    for i, e in enumerate(envs):
+        if not isinstance(e, MacroEnv):
+            raise ValueError(f"manager_vector_env: environment {i} is a {type(e).__name__}, not a MacroEnv")
+        same = (e.names == first.names and np.array_equal(e.durations, first.durations)
+                and e.param_dims == first.param_dims and e.gamma == first.gamma)  # fmt: skip
+        if not same:
+            raise ValueError(f"manager_vector_env: environment {i} has other macro-actions, durations or gamma than "
+                             "environment 0; the environments of one Manager must share them")  # fmt: skip
+    return ManagerVectorEnv(SerialWorlds(envs), first, on_substep=[e.on_substep for e in envs])

@@ -55,6 +55,7 @@ class PolicySkill(Skill):
         self.action_low = np.asarray(action_low, dtype=np.float64).reshape(-1)
         self.action_high = np.asarray(action_high, dtype=np.float64).reshape(-1)
         self.done_part, self.done_within = done_part, done_within
+        self.has_done = done_part is not None
         self.reads = tuple(p for p in names if p != param_part) + ((done_part,) if done_part else ())
 
     def check(self, layout: ObsLayout, action_space: gym.spaces.Box, measured: Sequence[str] = ()) -> None:

@@ -14,7 +14,7 @@ import gymnasium as gym
 
 from hrlp.arm.batched import VECTORISED, BatchedFactory, make_batched
 from hrlp.arm.handover import drive
-from hrlp.arm.manager import BatchedMacroVectorEnv
+from hrlp.arm.manager import batched_manager
 from hrlp.arm.registry import TASKS, ArmEnvFactory, make, probe_task
 from hrlp.config import MacroSpec, TrainConfig, auto_workers
 from hrlp.envs.actions import NormalisedParameters, is_parameterised, make_normalised
@@ -92,14 +92,14 @@ def skill_hashes(skills: list) -> dict[str, str]:
 
 class _BatchedMacroFactory(_MacroFactory, VectorConstructor):
     """A Manager's environment constructor whose ``n`` copies a sampler steps as one
-    :class:`~hrlp.skills.macro_env.BatchedMacroVectorEnv` (the batched backend)."""
+    :func:`~hrlp.arm.manager.batched_manager` (the batched backend)."""
 
     def vector(self, n: int, gamma: float) -> VectorEnv:
         if gamma != self.gamma:
             raise ValueError(f"the Manager's environments discount by {self.gamma}, not {gamma}")
         layout = self()
         features = tuple(dict.fromkeys(f for s in layout.skills for f in getattr(s, "features", ())))  # what skills read
-        return BatchedMacroVectorEnv(make_batched(self.name, n, features=features, **self.kwargs), layout)
+        return batched_manager(make_batched(self.name, n, features=features, **self.kwargs), layout)
 
 
 def batchable_task(task: str) -> bool:
