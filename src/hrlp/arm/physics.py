@@ -93,6 +93,20 @@ class PhysicsConfig:
         return self.timestep * self.substeps
 
 
+#: MuJoCo 3.10 changed ``mj_fullM`` from ``(m, dst, M)`` (the sparse ``d.qM``) to ``(m, d, dst)``.
+_FULLM_TAKES_DATA = tuple(int(x) for x in mujoco.__version__.split(".")[:2]) >= (3, 10)
+
+
+def full_inertia(model: mujoco.MjModel, data: mujoco.MjData, out: np.ndarray) -> np.ndarray:
+    """The joint-space inertia matrix M(q) of ``data``'s state written into ``out [nv, nv]`` (and returned), with
+    whichever signature this MuJoCo's ``mj_fullM`` has (:data:`_FULLM_TAKES_DATA`)."""
+    if _FULLM_TAKES_DATA:
+        mujoco.mj_fullM(model, data, out)
+    else:  # MuJoCo before 3.10
+        mujoco.mj_fullM(model, out, data.qM)
+    return out
+
+
 @functools.cache
 def model_xml() -> str:
     """The MJCF text of the arm (shipped inside the package)."""

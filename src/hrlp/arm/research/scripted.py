@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from hrlp.arm.physics import ARM_JOINTS, BASE_AXIS_XY, CAPSULE_RADIUS, CAPSULE_REST_Z, N_JOINTS, ArmPhysics
+from hrlp.arm.physics import ARM_JOINTS, BASE_AXIS_XY, CAPSULE_RADIUS, CAPSULE_REST_Z, N_JOINTS, ArmPhysics, full_inertia
 
 #: Motor gears of the 9 joints (ARM_CLAW facts): torque = gear * control.
 GEARS = np.array([100.0, 100.0, 100.0, 70.0, 70.0, 30.0, 30.0, 10.0, 10.0])
@@ -534,7 +534,7 @@ class ScriptedGrasp:
 
     def _computed_torque(self, q: np.ndarray) -> np.ndarray:
         p, w = self._now, self.config.omega
-        mujoco.mj_fullM(p.model, p.data, self._mass)
+        full_inertia(p.model, p.data, self._mass)
         acc = w * w * (q - p.qpos) - 2.0 * w * p.qvel
         # qfrc_bias holds gravity and Coriolis forces; the joints' damping (qfrc_passive) is cancelled too.
         return self._mass[:N_JOINTS, :N_JOINTS] @ acc + p.data.qfrc_bias[:N_JOINTS] - p.data.qfrc_passive[:N_JOINTS]
