@@ -204,6 +204,27 @@ def test_a_run_on_a_dict_environment_becomes_a_library_skill_that_acts_as_the_ru
     assert listed.exit_code == 0 and "│ point " in listed.output and TASK in listed.output, listed.output
 
 
+def test_a_learned_skill_that_does_not_fit_the_environment_is_refused_in_one_line(trained):
+    skill = from_run(trained / "flat", "point", low=-1, high=1)
+
+    class Wider(goal_envs.PointGoal):  # the same parts, a 3-d action
+        def __init__(self) -> None:
+            super().__init__()
+            self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float64)
+
+    with pytest.raises(ValueError, match="skill point emits 2 action numbers; this environment takes 3"):
+        MacroEnv(Wider(), [skill])
+
+    class Longer(goal_envs.PointGoal):  # a 6-number state where the skill read 4
+        def __init__(self) -> None:
+            super().__init__()
+            self.observation_space = gym.spaces.Dict({**self.observation_space.spaces,
+                                                      "observation": gym.spaces.Box(-np.inf, np.inf, (6,))})  # fmt: skip
+
+    with pytest.raises(ValueError, match="skill point reads 4 numbers of part 'observation'; this environment has 6"):
+        MacroEnv(Longer(), [skill])
+
+
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [
