@@ -84,7 +84,7 @@ def check_rendering(width: int, height: int) -> None:
 
     import mujoco
 
-    from hrlp.arm.physics import model_xml
+    from hrlp.arm.physics import model_xml, open_renderer
 
     model = mujoco.MjModel.from_xml_string(model_xml())
     max_w, max_h = int(model.vis.global_.offwidth), int(model.vis.global_.offheight)
@@ -98,7 +98,7 @@ def check_rendering(width: int, height: int) -> None:
     try:
         with warnings.catch_warnings():  # GLFW warns before it fails: the one line below says it all
             warnings.simplefilter("ignore")
-            renderer = mujoco.Renderer(model, height=16, width=16)
+            renderer = open_renderer(model, 16, 16)
     except Exception as e:  # a system library or a display missing, however the backend says so
         raise RenderingError(_gl_problem(backend, e)) from None
     renderer.close()

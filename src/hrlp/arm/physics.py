@@ -97,6 +97,21 @@ class PhysicsConfig:
 _FULLM_TAKES_DATA = tuple(int(x) for x in mujoco.__version__.split(".")[:2]) >= (3, 10)
 
 
+def open_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+    """``mujoco.Renderer(model, height, width)``; one whose OpenGL context could not be made is closed before the error
+    goes on, so that no second traceback follows at exit (MuJoCo 3.3's ``Renderer.__del__`` reads the context it never
+    made)."""
+    renderer = mujoco.Renderer.__new__(mujoco.Renderer)
+    try:
+        renderer.__init__(model, height=height, width=width)  # type: ignore[misc]
+    except BaseException:
+        for name in ("_gl_context", "_mjr_context"):
+            if not hasattr(renderer, name):
+                setattr(renderer, name, None)
+        raise
+    return renderer
+
+
 def full_inertia(model: mujoco.MjModel, data: mujoco.MjData, out: np.ndarray) -> np.ndarray:
     """The joint-space inertia matrix M(q) of ``data``'s state written into ``out [nv, nv]`` (and returned), with
     whichever signature this MuJoCo's ``mj_fullM`` has (:data:`_FULLM_TAKES_DATA`)."""
@@ -453,7 +468,7 @@ class ArmPhysics:
         if self._renderer is None or (self._renderer.width, self._renderer.height) != (width, height):
             if self._renderer is not None:
                 self._renderer.close()
-            self._renderer = mujoco.Renderer(self.model, height=height, width=width)
+            self._renderer = open_renderer(self.model, height, width)
         self._renderer.update_scene(self.data, camera=camera)
         return self._renderer.render()
 
