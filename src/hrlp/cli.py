@@ -20,9 +20,11 @@ from hrlp import bounds
 from hrlp import cli_params as check
 from hrlp.config import (
     ALGOS,
+    OFF_POLICY,
     PAPER_SETTINGS,
     AdvantageConfig,
     PPOConfig,
+    SACConfig,
     TrainConfig,
     TRPOConfig,
     ValueFitConfig,
@@ -399,6 +401,7 @@ _LEFT_OUT: dict[type, dict[str, str]] = {
         "advantage": "nested: each AdvantageConfig field is an option of its own",
         "trpo": "nested: each TRPOConfig field is an option of its own",
         "ppo": "nested: each PPOConfig field is an option of its own (--ppo-...)",
+        "sac": "nested: each SACConfig field is an option of its own (--sac-...)",
         "value": "nested: each ValueFitConfig field is an option of its own (--value-...)",
         "macro": "a MacroSpec that train-manager's own options build (--skills, --k, --library, --micro..., --handover...); "
         "a flat run has none",
@@ -410,10 +413,11 @@ _LEFT_OUT: dict[type, dict[str, str]] = {
 _OPTION_NAMES = {(ValueFitConfig, "max_iter"): "value_iters", (ValueFitConfig, "fraction"): "value_fraction"}
 """Options named otherwise than their field: the value fit's first two options predate the generated ones."""
 
-_NESTED: dict[type, str] = {AdvantageConfig: "advantage", TRPOConfig: "trpo", PPOConfig: "ppo", ValueFitConfig: "value"}
+_NESTED: dict[type, str] = {AdvantageConfig: "advantage", TRPOConfig: "trpo", PPOConfig: "ppo", SACConfig: "sac",
+                            ValueFitConfig: "value"}
 """TrainConfig's nested records, by the field that holds each."""
 
-_PREFIXES = {ValueFitConfig: "value_", PPOConfig: "ppo_"}
+_PREFIXES = {ValueFitConfig: "value_", PPOConfig: "ppo_", SACConfig: "sac_"}
 """Option-name prefixes of the records whose field names would clash with another's (``--ppo-entropy-coef``)."""
 
 _SETTINGS: tuple[_Setting, ...] = tuple(
@@ -425,7 +429,8 @@ _SETTINGS: tuple[_Setting, ...] = tuple(
 """The generated options of ``train`` and ``train-manager``, in the fields' order."""
 
 _PANELS = {TrainConfig: "Run (TrainConfig)", AdvantageConfig: "Advantages (AdvantageConfig)", TRPOConfig: "TRPO (TRPOConfig)",
-           PPOConfig: "PPO (PPOConfig, with --algo ppo)", ValueFitConfig: "Value fit (ValueFitConfig)"}  # fmt: skip
+           PPOConfig: "PPO (PPOConfig, with --algo ppo)", SACConfig: "SAC (SACConfig, with --algo sac)",
+           ValueFitConfig: "Value fit (ValueFitConfig)"}  # fmt: skip
 """The help's section for each dataclass's options."""
 
 _OPTION_TYPES: dict[str, Any] = {"int": int, "float": float, "bool": bool, "str": str, "int | None": int | None,
@@ -462,6 +467,16 @@ _CHECKS: dict[str, check.Check] = {  # the bounds checked while the options are 
     "ppo_max_grad_norm": check.real(0.0),
     "ppo_target_kl": check.real(0.0),
     "ppo_entropy_coef": check.real(0.0),
+    "sac_lr": check.real(0.0, low_open=True),
+    "sac_batch_size": check.count(1, 1_000_000, "a minibatch is drawn per gradient step"),
+    "sac_buffer_size": check.count(1, bounds.MAX_STEPS, bounds.WHY_STEPS, "number of transitions"),
+    "sac_learning_starts": check.count(0, bounds.MAX_STEPS, bounds.WHY_STEPS),
+    "sac_updates_per_step": check.real(0.0, 1000.0),
+    "sac_tau": check.real(0.0, 1.0, low_open=True),
+    "sac_hidden": check.widths,
+    "sac_init_alpha": check.real(0.0, low_open=True),
+    "sac_choice_entropy": check.real(0.0, 1.0),
+    "sac_her_future": check.count(0, 1000, "each relabelled goal replaces a real one in the minibatch"),
     "value_iters": check.count(1),
     "value_l2_coef": check.real(0.0),
     "value_history_size": check.count(1),
@@ -598,7 +613,7 @@ def train(
     (hrlp.config), with their defaults (--paper-settings: the paper's, where the defaults are faster)."""
     _apply_paper_settings(ctx)
     if not resume:  # before torch is imported: the task, its arguments and spaces (a resume uses the run's own)
-        notes = [_episode_length_defaults(ctx, task)]
+        notes = [_off_policy_defaults(ctx)] if settings["algo"] in OFF_POLICY else [_episode_length_defaults(ctx, task)]
         notes.append(_small_batch_defaults(ctx))
         _check_numbers(ctx)
         _check_task(task, settings["episode_steps"], task_arg, ctx)
@@ -718,10 +733,10 @@ def train_manager(
                              f"which --no-handover turns off: drop --no-handover, or leave {them} out")  # fmt: skip
         if k is not None and not skills.strip():
             raise ValueError("--k sets how long each skill runs, and this Manager has no skills (--skills)")
-        note = _small_batch_defaults(ctx)
+        notes = [_off_policy_defaults(ctx), _small_batch_defaults(ctx)]
         _check_numbers(ctx)  # before torch is imported
         _check_task(task, settings["episode_steps"], task_arg, ctx)
-        if note:
+        for note in filter(None, notes):
             err_console.print(note, soft_wrap=True, highlight=False)
     from hrlp.config import Handover, MacroSpec, MicroAction
 
@@ -858,13 +873,31 @@ def _episode_length_defaults(ctx: typer.Context, task: str) -> str:
             "options to choose others; docs/training.md)")  # fmt: skip
 
 
+OFF_POLICY_SETTINGS: dict[str, Any] = {"num_envs": 4, "batch_steps": 10_000}
+"""``--algo sac``'s run settings where they are left out: 4 environments (a gradient step per decision collected, as
+Stable-Baselines3's SAC, whatever their number), and a log row and checkpoint (the replay buffer with it) every 10,000
+decisions instead of the on-policy batch."""
+
+
+def _off_policy_defaults(ctx: typer.Context) -> str:
+    """For an off-policy ``--algo``, :data:`OFF_POLICY_SETTINGS` into ``ctx.params`` for the options left out; the note
+    that says so ("" when nothing changes or the algorithm is on-policy)."""
+    p = ctx.params
+    left_out = [name for name in OFF_POLICY_SETTINGS if not _given(ctx, name)]
+    if p["algo"] not in OFF_POLICY or not left_out:
+        return ""
+    p.update({name: OFF_POLICY_SETTINGS[name] for name in left_out})
+    shown = " ".join(f"--{name.replace('_', '-')} {OFF_POLICY_SETTINGS[name]:,}" for name in left_out)
+    return f"note: --algo {p['algo']} runs with {shown} (give the options to choose others)"
+
+
 def _small_batch_defaults(ctx: typer.Context) -> str:
     """For a batch too small for the default ``--fisher-fraction`` or ``--value-fraction`` (fewer than one state in
     each stride: a few decisions per environment), left out, put 1 (every state) into ``ctx.params`` and return the
     note that says so ("" when nothing changes). A fraction given on the command line is checked as given."""
     p = ctx.params
-    if p["batch_steps"] < p["num_envs"]:
-        return ""  # TrainConfig says so in its own words
+    if p["batch_steps"] < p["num_envs"] or p["algo"] in OFF_POLICY:
+        return ""  # TrainConfig says so in its own words; an off-policy run has no Fisher matrix nor baseline fit
     steps_per_env = -(-p["batch_steps"] // p["num_envs"])
     sizes = {"fisher_fraction": (steps_per_env * p["num_envs"], "decisions"), "value_fraction": (steps_per_env, "time steps")}
     changed = [name for name, (size, unit) in sizes.items()
@@ -889,7 +922,7 @@ def _check_numbers(ctx: typer.Context) -> None:
     if p["batch_steps"] < p["num_envs"]:
         return  # TrainConfig says so in its own words
     steps_per_env = -(-p["batch_steps"] // p["num_envs"])
-    problems = [
+    problems = [] if p["algo"] in OFF_POLICY else [  # the Fisher matrix and the baseline fit are on-policy
         bounds.fraction_problem("fisher_fraction", p["fisher_fraction"], steps_per_env * p["num_envs"], "decisions"),
         bounds.fraction_problem("value fraction", p["value_fraction"], steps_per_env, "time steps"),
     ]

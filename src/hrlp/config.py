@@ -29,6 +29,7 @@ __all__ = [
     "WORKERS_VARIABLE",
     "AdvantageConfig",
     "PPOConfig",
+    "SACConfig",
     "TRPOConfig",
     "TrainConfig",
     "ValueFitConfig",
@@ -140,8 +141,64 @@ class PPOConfig:
                 raise ValueError(f"{name} must be a positive integer, got {v!r}")
 
 
+@dataclass(frozen=True)
+class SACConfig:
+    """Soft actor-critic's settings (``algo="sac"``): off-policy, from a replay buffer. Stable-Baselines3's defaults where
+    SAC has them; for parameterised actions and Managers, hybrid SAC (a categorical choice with squashed Gaussian
+    parameters, a temperature for each; Delalleau et al. 2019, MAPLE 2022); goals relabelled (HER, Andrychowicz et al.
+    2017, its ``future`` strategy) on goal-conditioned environments."""
+
+    lr: float = 3e-4
+    """Adam's learning rate for the actor, the critics and the temperatures."""
+    batch_size: int = 256
+    """Transitions per gradient step, drawn uniformly from the replay buffer."""
+    buffer_size: int = 1_000_000
+    """Transitions the replay buffer holds (the oldest are overwritten); a Manager's transition is one decision."""
+    learning_starts: int = 1_000
+    """Decisions collected before the first gradient step."""
+    updates_per_step: float = 1.0
+    """Gradient steps per decision collected (the update-to-data ratio)."""
+    tau: float = 0.005
+    """Polyak factor of the target critics: ``target <- (1 - tau) target + tau critic`` after each gradient step."""
+    hidden: tuple[int, ...] = (256, 256)
+    """Hidden layer widths of the actor and of each critic (ReLU)."""
+    init_alpha: float = 0.1
+    """Initial temperature of both entropy terms (both are then tuned to their targets; Stable-Baselines3 starts at 1,
+    which holds a choice near uniform for thousands of steps on rewards of order 1)."""
+    choice_entropy: float = 0.5
+    """Target entropy of the discrete choice, as a fraction of its maximum log(n); the parameters' target is -d per
+    block of d parameters (SAC's -dim(A))."""
+    her_future: int = 4
+    """Goals relabelled per real one on a goal-conditioned environment (a Dict observation with ``observation``,
+    ``achieved_goal`` and ``desired_goal``, and ``compute_reward``): a share her_future / (her_future + 1) of each
+    minibatch gets a goal achieved later in its episode (HER's ``future``, k = 4). 0: no relabelling."""
+
+    def __post_init__(self) -> None:
+        for name in ("lr", "tau", "init_alpha"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if not self.tau <= 1:
+            raise ValueError(f"tau must be in (0, 1], got {self.tau!r}")
+        for name in ("updates_per_step", "choice_entropy"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a number >= 0, got {v!r}")
+        if not self.choice_entropy <= 1:
+            raise ValueError(f"choice_entropy must be in [0, 1] (a fraction of log n), got {self.choice_entropy!r}")
+        for name, low in (("batch_size", 1), ("buffer_size", 1), ("learning_starts", 0), ("her_future", 0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < low:
+                raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
+        if not self.hidden or any(isinstance(h, bool) or not isinstance(h, int) or h <= 0 for h in self.hidden):
+            raise ValueError(f"hidden must be positive layer widths, got {self.hidden!r}")
+
+
 #: The policy optimisers a run may use (``TrainConfig.algo``).
-ALGOS = ("trpo", "ppo")
+ALGOS = ("trpo", "ppo", "sac")
+
+#: The off-policy ones among :data:`ALGOS`: they learn from a replay buffer, not from each batch alone.
+OFF_POLICY = ("sac",)
 
 
 @dataclass(frozen=True)
@@ -323,13 +380,18 @@ class TrainConfig:
     init_log_std: float = 0.0
     """Initial log standard deviation of the policy's Gaussian action noise (0: std 1 on [-1, 1] torques)."""
     algo: str = "trpo"
-    """The policy optimiser: ``trpo`` (the paper's, settings in ``trpo``) or ``ppo`` (clipped surrogate, ``ppo``)."""
+    """The policy optimiser: ``trpo`` (the paper's, settings in ``trpo``), ``ppo`` (clipped surrogate, ``ppo``) or
+    ``sac`` (off-policy soft actor-critic from a replay buffer, hybrid for parameterised actions and Managers, with goal
+    relabelling; settings in ``sac``; it samples in the training process, and a batch is then the decisions between two
+    log rows and checkpoints)."""
     advantage: AdvantageConfig = field(default_factory=AdvantageConfig)
     """Return and advantage settings (gamma 0.99, GAE lambda 0.97)."""
     trpo: TRPOConfig = field(default_factory=TRPOConfig)
     """TRPO settings (max KL 0.01, ...)."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     """PPO settings, used with ``algo="ppo"``."""
+    sac: SACConfig = field(default_factory=SACConfig)
+    """SAC settings, used with ``algo="sac"``."""
     value: ValueFitConfig = field(default_factory=ValueFitConfig)
     """Value-baseline fit settings."""
     macro: MacroSpec | None = None
@@ -373,6 +435,10 @@ class TrainConfig:
             raise ValueError(f"reward_scale must be a positive finite number, got {self.reward_scale!r}")
         if self.algo not in ALGOS:
             raise ValueError(f"algo must be one of {', '.join(ALGOS)}, got {self.algo!r}")
+        if self.algo in OFF_POLICY and self.workers > 1:
+            raise ValueError(f"algo {self.algo} samples in the training process: workers must be 1 (or 0), got {self.workers}")
+        if self.algo in OFF_POLICY and self.init_from is not None:
+            raise ValueError(f"init_from starts a Gaussian policy trained on-policy; algo {self.algo} cannot start from it")
         if self.algo == "ppo" and self.steps_per_env * self.num_envs < self.ppo.minibatches:
             raise ValueError(f"PPO's {self.ppo.minibatches} minibatches need a batch of at least as many decisions, "
                              f"got {self.steps_per_env * self.num_envs}")  # fmt: skip
@@ -392,7 +458,7 @@ class TrainConfig:
         if "episode_steps" in self.task_kwargs:
             raise ValueError("give the episode length as episode_steps (--episode-steps), not as a task argument")
         batch = self.steps_per_env * self.num_envs
-        problems = [
+        problems = [] if self.algo in OFF_POLICY else [  # the Fisher matrix and the baseline fit are on-policy
             bounds.fraction_problem("fisher_fraction", self.trpo.fisher_fraction, batch, "decisions"),
             bounds.fraction_problem("value fraction", self.value.fraction, self.steps_per_env, "time steps"),
         ]
@@ -420,7 +486,7 @@ class TrainConfig:
         """Inverse of :meth:`to_json`."""
         d = dict(d)
         d["hidden"] = tuple(d["hidden"])
-        for name in ("trpo", "value", "advantage", "ppo"):
+        for name in ("trpo", "value", "advantage", "ppo", "sac"):
             if name in d and not isinstance(d[name], dict):
                 raise TypeError(f"{name} must be a mapping of settings, got {type(d[name]).__name__}")
         trpo, value = dict(d["trpo"]), dict(d["value"])
@@ -434,6 +500,10 @@ class TrainConfig:
         d["advantage"] = AdvantageConfig(**{**moved, **d.get("advantage", {})})
         d["trpo"] = TRPOConfig(**trpo)
         d["ppo"] = PPOConfig(**d.get("ppo", {}))
+        sac = dict(d.get("sac", {}))
+        if "hidden" in sac:
+            sac["hidden"] = tuple(sac["hidden"])
+        d["sac"] = SACConfig(**sac)
         d["value"] = ValueFitConfig(**value)
         if d.get("macro"):
             d["macro"] = MacroSpec.from_json(d["macro"])
@@ -484,8 +554,9 @@ options they name that are left out."""
 
 def with_settings(config: TrainConfig, settings: dict[str, Any]) -> TrainConfig:
     """``config`` with each of ``settings`` replaced: a :class:`TrainConfig` field by its name, a field of a nested
-    record (``trpo``, ``value``, ``advantage``, ``ppo``) as ``record.field``. Raises ValueError for an unknown name."""
-    nested = {"advantage", "trpo", "ppo", "value"}
+    record (``trpo``, ``value``, ``advantage``, ``ppo``, ``sac``) as ``record.field``. Raises ValueError for an unknown
+    name."""
+    nested = {"advantage", "trpo", "ppo", "sac", "value"}
     top: dict[str, Any] = {}
     inner: dict[str, dict[str, Any]] = {}
     for name, value in settings.items():

@@ -176,6 +176,8 @@ class Sampler:
         self._len = np.zeros(n, dtype=np.int64)
         self.timing = Timing()
         self.last_raw_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations of the last batch
+        self.last_raw_next_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations each step produced
+        self.last_tau: np.ndarray | None = None  # [T, N] low-level steps of each decision
         self._requested: int | None = None
         self.first_index = first_index
 
@@ -209,6 +211,8 @@ class Sampler:
         actions_buf: np.ndarray | None = None
         episodes: list[Episode] = []
         raw_buf = np.empty((steps_per_env, n, dim))
+        raw_next = np.empty((steps_per_env, n, dim))
+        tau_buf = np.empty((steps_per_env, n), dtype=np.int64)
         env_steps = 0
         physics = 0.0
         act = self.policy.numpy_actor()  # the weights stay fixed during a batch
@@ -245,11 +249,12 @@ class Sampler:
                 self._non_finite(t, {"reward": rewards[t], "observation": step.next_obs, "reset observation": self._obs},
                                  episode_steps)  # fmt: skip
             next_buf[t] = self.normalizer.normalize(step.next_obs)
+            raw_next[t], tau_buf[t] = step.next_obs, step.tau
             self.timing.inference += t1 - t0
             self.timing.env += t2 - t1
         assert actions_buf is not None
         self.timing.physics += physics
-        self.last_raw_obs = raw_buf
+        self.last_raw_obs, self.last_raw_next_obs, self.last_tau = raw_buf, raw_next, tau_buf
         if not self.normalizer.frozen:
             self.normalizer.update(raw_buf.reshape(-1, dim))
         f32 = torch.float32

@@ -21,11 +21,12 @@ from hrlp.algos.trpo import TRPOConfig
 from hrlp.algos.value import ValueFitConfig
 from hrlp.cli import app
 from hrlp.cli_params import BoundError, config_field
-from hrlp.config import AdvantageConfig, PPOConfig
+from hrlp.config import AdvantageConfig, PPOConfig, SACConfig
 from hrlp.train import TrainConfig, read_run_checkpoint
 
-CONFIGS = (TrainConfig, AdvantageConfig, TRPOConfig, PPOConfig, ValueFitConfig)
-LEFT_OUT = {(TrainConfig, name) for name in ("task", "advantage", "trpo", "ppo", "value", "macro", "task_kwargs")}
+CONFIGS = (TrainConfig, AdvantageConfig, TRPOConfig, PPOConfig, SACConfig, ValueFitConfig)
+LEFT_OUT = {(TrainConfig, name) for name in ("task", "advantage", "trpo", "ppo", "sac", "value", "macro",
+                                                             "task_kwargs")}
 """The fields that are not generated options (cli._LEFT_OUT says why)."""
 VALUE_FLAGS = {"max_iter": "--value-iters", "fraction": "--value-fraction", "l2_coef": "--value-l2-coef",
                "history_size": "--value-history-size"}  # fmt: skip
@@ -83,6 +84,16 @@ SET = {
     (PPOConfig, "target_kl"): (("--ppo-target-kl", "0.05"), 0.05),
     (PPOConfig, "entropy_coef"): (("--ppo-entropy-coef", "0.01"), 0.01),
     (PPOConfig, "normalize_advantages"): (("--no-ppo-normalize-advantages",), False),
+    (SACConfig, "lr"): (("--sac-lr", "1e-3"), 1e-3),
+    (SACConfig, "batch_size"): (("--sac-batch-size", "64"), 64),
+    (SACConfig, "buffer_size"): (("--sac-buffer-size", "5000"), 5000),
+    (SACConfig, "learning_starts"): (("--sac-learning-starts", "10"), 10),
+    (SACConfig, "updates_per_step"): (("--sac-updates-per-step", "0.5"), 0.5),
+    (SACConfig, "tau"): (("--sac-tau", "0.01"), 0.01),
+    (SACConfig, "hidden"): (("--sac-hidden", "32,32"), (32, 32)),
+    (SACConfig, "init_alpha"): (("--sac-init-alpha", "0.2"), 0.2),
+    (SACConfig, "choice_entropy"): (("--sac-choice-entropy", "0.3"), 0.3),
+    (SACConfig, "her_future"): (("--sac-her-future", "2"), 2),
     (ValueFitConfig, "max_iter"): (("--value-iters", "5"), 5),
     (ValueFitConfig, "l2_coef"): (("--value-l2-coef", "0.01"), 0.01),
     (ValueFitConfig, "history_size"): (("--value-history-size", "5"), 5),
@@ -96,7 +107,8 @@ ELSEWHERE = {(TrainConfig, "init_from")}
 def _flag(config: type, field: str) -> str:
     if config is ValueFitConfig:
         return VALUE_FLAGS[field]
-    return f"--{'ppo-' if config is PPOConfig else ''}{field.replace('_', '-')}"
+    prefix = {PPOConfig: "ppo-", SACConfig: "sac-"}.get(config, "")
+    return f"--{prefix}{field.replace('_', '-')}"
 
 
 def _listed() -> list[tuple[type, str]]:
@@ -221,7 +233,7 @@ def test_every_option_set_on_the_command_line_reaches_the_trainers_config_and_re
     saved = read_run_checkpoint(run / "checkpoint")[2]  # the config the trainer ran with
     for (config, field), (_, value) in SET.items():
         holder = {TrainConfig: saved, AdvantageConfig: saved.advantage, TRPOConfig: saved.trpo, PPOConfig: saved.ppo,
-                  ValueFitConfig: saved.value}[config]  # fmt: skip
+                  SACConfig: saved.sac, ValueFitConfig: saved.value}[config]  # fmt: skip
         assert getattr(holder, field) == value, field
     assert saved == TrainConfig.from_json(json.loads((run / "config.json").read_text()))
     # A resume refuses a new value of any of them, naming it; the same values (or none) continue the run.

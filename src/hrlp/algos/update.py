@@ -20,7 +20,7 @@ from hrlp.algos.trpo import trpo_update
 from hrlp.config import PPOConfig, TrainConfig, TRPOConfig
 from hrlp.policies.distributions import Distribution
 
-__all__ = ["PPOUpdate", "PolicyUpdate", "TRPOUpdate", "make_update"]
+__all__ = ["PPOUpdate", "PolicyUpdate", "TRPOUpdate", "adam_tensors", "load_adam", "make_update"]
 
 
 class PolicyUpdate(Protocol):
@@ -90,29 +90,40 @@ class PPOUpdate:
         return {**{k: float(v) for k, v in stats.to_dict().items()}, "accepted": 1.0}
 
     def state(self) -> dict[str, Tensor]:
-        out = {"ppo.generator": self.generator.get_state()}
-        adam = self.optimizer.state_dict()["state"]
-        for i, s in adam.items():
-            for key, value in s.items():
-                out[f"ppo.adam.{i}.{key}"] = value.detach().clone().reshape(value.shape or (1,))
-        return out
+        return {"ppo.generator": self.generator.get_state(), **adam_tensors("ppo.adam", self.optimizer)}
 
     def load_state(self, tensors: dict[str, Tensor]) -> None:
         if "ppo.generator" not in tensors:
             raise ValueError("the checkpoint holds no PPO state (was it trained with --algo trpo?)")
         self.generator.set_state(tensors["ppo.generator"])
-        full = self.optimizer.state_dict()
-        state: dict[int, dict[str, Tensor]] = {}
-        for name, value in tensors.items():
-            if name.startswith("ppo.adam."):
-                i, key = name.removeprefix("ppo.adam.").split(".", 1)
-                state.setdefault(int(i), {})[key] = value.reshape(()) if key == "step" else value
-        full["state"] = state
-        self.optimizer.load_state_dict(full)
+        load_adam("ppo.adam", self.optimizer, tensors)
+
+
+def adam_tensors(prefix: str, optimizer: torch.optim.Optimizer) -> dict[str, Tensor]:
+    """An optimiser's per-parameter state (Adam's moments and step counts) as tensors ``<prefix>.<i>.<key>``."""
+    out = {}
+    for i, s in optimizer.state_dict()["state"].items():
+        for key, value in s.items():
+            out[f"{prefix}.{i}.{key}"] = value.detach().clone().reshape(value.shape or (1,))
+    return out
+
+
+def load_adam(prefix: str, optimizer: torch.optim.Optimizer, tensors: dict[str, Tensor]) -> None:
+    """Restore :func:`adam_tensors`'s state into ``optimizer`` (its settings stay its own)."""
+    full = optimizer.state_dict()
+    state: dict[int, dict[str, Tensor]] = {}
+    for name, value in tensors.items():
+        if name.startswith(f"{prefix}."):
+            i, key = name.removeprefix(f"{prefix}.").split(".", 1)
+            state.setdefault(int(i), {})[key] = value.reshape(()) if key == "step" else value
+    full["state"] = state
+    optimizer.load_state_dict(full)
 
 
 def make_update(cfg: TrainConfig, policy: nn.Module) -> PolicyUpdate:
     """The update ``cfg.algo`` names, over ``policy``'s parameters."""
     if cfg.algo == "ppo":
         return PPOUpdate(policy, cfg.ppo, cfg.seed)
+    if cfg.algo != "trpo":
+        raise ValueError(f"{cfg.algo} is not an on-policy update (hrlp.training.offpolicy trains it)")
     return TRPOUpdate(policy, cfg.trpo)

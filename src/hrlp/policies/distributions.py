@@ -32,6 +32,8 @@ __all__ = [
     "DiagGaussian",
     "Distribution",
     "Hierarchical",
+    "HybridSquashed",
+    "SquashedGaussian",
     "flat_to_tuple",
     "flat_to_tuples",
     "tuple_to_flat",
@@ -330,6 +332,157 @@ class Hierarchical(Distribution):
         """Snapshot with detached, copied parameters."""
         g, log_p = self.gaussian.detach(), self.categorical.log_p.detach().clone()
         return Hierarchical(log_p, g.mean, g.log_std, self.param_dims)
+
+
+_ATANH_LIMIT = 1.0 - 1e-6
+"""Squashed actions are clipped to ``[-limit, limit]`` before ``atanh`` (a float32 ``tanh`` reaches +-1 exactly)."""
+
+
+def _squashed_log_density(u: Tensor, mean: Tensor, log_std: Tensor) -> tuple[Tensor, Tensor]:
+    """``(a, log density of a)`` elementwise for pre-tanh values ``u``: ``a = tanh(u)`` and
+    ``log N(u; mean, std) - log(1 - tanh(u)^2)`` (the change of variables of Haarnoja et al. 2018, Appendix C), the
+    Jacobian written ``2 (log 2 - u - softplus(-2u))`` as it stays finite for large ``|u|`` -> ``[B, D]`` each."""
+    jacobian = 2.0 * (math.log(2.0) - u - torch.nn.functional.softplus(-2.0 * u))
+    return torch.tanh(u), _gaussian_log_density(u, mean, log_std) - jacobian
+
+
+class SquashedGaussian(Distribution):
+    """``a = tanh(u)``, ``u ~ N(mean, diag(exp(log_std)^2))``: SAC's bounded action distribution on ``(-1, 1)^D``
+    (Haarnoja et al. 2018, "Soft Actor-Critic Algorithms and Applications", Appendix C).
+
+    Args:
+        mean: ``[B, D]`` means of ``u``.
+        log_std: ``[B, D]`` (or broadcastable) log standard deviations of ``u``.
+
+    ``kl`` is exact: ``tanh`` is a bijection, which leaves a KL divergence unchanged, so it is the Gaussians' KL.
+    ``entropy`` has no closed form; it is a one-sample estimate ``-log pi(a)`` with ``a`` reparameterised.
+    """
+
+    def __init__(self, mean: Tensor, log_std: Tensor) -> None:
+        if mean.ndim != 2:
+            raise ValueError(f"mean must be [B, D], got shape {tuple(mean.shape)}")
+        self.mean = mean
+        self.log_std = log_std.expand_as(mean)
+
+    @property
+    def batch_size(self) -> int:
+        """Number ``B`` of distributions in the batch."""
+        return self.mean.shape[0]
+
+    def rsample(self, generator: torch.Generator | None = None) -> tuple[Tensor, Tensor]:
+        """A reparameterised sample ``a = tanh(mean + std * eps)`` ``[B, D]`` and its elementwise log density ``[B, D]``
+        (gradients flow into ``mean`` and ``log_std``)."""
+        eps = torch.randn(self.mean.shape, generator=generator, dtype=self.mean.dtype, device=self.mean.device)
+        return _squashed_log_density(self.mean + torch.exp(self.log_std) * eps, self.mean, self.log_std)
+
+    def log_prob(self, actions: Tensor) -> Tensor:
+        """``sum_i log pi(a_i)`` for squashed ``actions`` ``[B, D]`` in ``(-1, 1)`` -> ``[B]``."""
+        u = torch.atanh(actions.clamp(-_ATANH_LIMIT, _ATANH_LIMIT))
+        return _squashed_log_density(u, self.mean, self.log_std)[1].sum(-1)
+
+    def kl(self, other: SquashedGaussian) -> Tensor:
+        """``KL(self || other)`` -> ``[B]``: the pre-tanh Gaussians' (exact)."""
+        return _gaussian_kl(self.mean, self.log_std, other.mean, other.log_std).sum(-1)
+
+    def entropy(self) -> Tensor:
+        """A one-sample estimate ``-log pi(a)``, ``a`` drawn from the global generator -> ``[B]``."""
+        return -self.rsample()[1].sum(-1)
+
+    @torch.no_grad()
+    def sample(self, generator: torch.Generator | None = None) -> Tensor:
+        """``tanh(mean + std * eps)`` -> ``[B, D]``."""
+        return self.rsample(generator)[0]
+
+    @torch.no_grad()
+    def mode(self) -> Tensor:
+        """``tanh(mean)`` (the image of the Gaussian's mode, SAC's deterministic action) -> ``[B, D]``."""
+        return torch.tanh(self.mean)
+
+    def detach(self) -> SquashedGaussian:
+        """Snapshot with detached, copied parameters."""
+        return SquashedGaussian(self.mean.detach().clone(), self.log_std.detach().clone())
+
+
+class HybridSquashed(Distribution):
+    """A choice ``k ~ softmax(logits)`` and, for it, squashed Gaussian parameters ``x_k = tanh(u_k)`` in ``(-1, 1)^{d_k}``:
+    the actor of hybrid SAC (Delalleau et al. 2019, "Discrete and Continuous Action Representation for Practical RL in
+    Video Games", Section 3; MAPLE, Nasiriany et al. 2022, Section IV-B). Actions use :class:`Hierarchical`'s encoding,
+    ``[k, x_1, ..., x_n]`` rows ``[B, 1 + S]``.
+
+    ``pi(k, x | s) = p_k(s) pi_k(x_k | s)``; :meth:`kl` is Lemma 1's (exact, as for :class:`SquashedGaussian`);
+    :meth:`entropy` is ``H(p) + sum_k p_k H(pi_k)`` with each ``H(pi_k)`` a one-sample estimate. A plain Box space is
+    the case ``n = 1``, a Discrete one the case ``d_k = 0`` for every ``k``.
+
+    Args:
+        logits: ``[B, n]`` unnormalised choice logits.
+        means: ``[B, S]`` pre-tanh means of every block, concatenated in choice order.
+        log_std: ``[B, S]`` pre-tanh log standard deviations.
+        param_dims: ``(d_1, ..., d_n)``; zeros allowed.
+    """
+
+    def __init__(self, logits: Tensor, means: Tensor, log_std: Tensor, param_dims: Sequence[int]) -> None:
+        self.param_dims = tuple(int(d) for d in param_dims)
+        if not self.param_dims or any(d < 0 for d in self.param_dims):
+            raise ValueError(f"param_dims must be a non-empty tuple of non-negative ints, got {self.param_dims}")
+        if logits.ndim != 2 or logits.shape[1] != len(self.param_dims):
+            raise ValueError(f"logits must be [B, {len(self.param_dims)}], got shape {tuple(logits.shape)}")
+        if means.ndim != 2 or means.shape != (logits.shape[0], sum(self.param_dims)):
+            raise ValueError(f"means must be [B, {sum(self.param_dims)}], got shape {tuple(means.shape)}")
+        self.categorical = Categorical(logits)
+        self.squashed = SquashedGaussian(means, log_std)
+        self._owner, self._blocks = _block_layout(self.param_dims, means.dtype, means.device)  # [S], [S, n]
+
+    @property
+    def batch_size(self) -> int:
+        """Number ``B`` of distributions in the batch."""
+        return self.categorical.batch_size
+
+    @property
+    def n(self) -> int:
+        """Number of choices."""
+        return len(self.param_dims)
+
+    def rsample_blocks(self, generator: torch.Generator | None = None) -> tuple[Tensor, Tensor]:
+        """Reparameterised parameters for every choice at once, ``x [B, S]``, and each block's log density
+        ``log pi_k(x_k | s)`` ``[B, n]`` (0 for a parameterless choice): what the hybrid SAC losses sum over ``k``."""
+        x, log_density = self.squashed.rsample(generator)
+        return x, log_density @ self._blocks
+
+    def log_prob(self, actions: Tensor) -> Tensor:
+        """``log p_k + log pi_k(x_k)`` with ``k = actions[:, 0]`` -> ``[B]``; the other blocks are ignored."""
+        k = actions[:, 0].long()
+        x = actions[:, 1:].clamp(-_ATANH_LIMIT, _ATANH_LIMIT)
+        per_column = _squashed_log_density(torch.atanh(x), self.squashed.mean, self.squashed.log_std)[1]
+        chosen = self._owner.unsqueeze(0) == k.unsqueeze(-1)
+        return self.categorical.log_prob(k) + torch.where(chosen, per_column, 0.0).sum(-1)
+
+    def kl(self, other: HybridSquashed) -> Tensor:
+        """Lemma 1: ``KL(p, p~) + sum_k p_k KL(pi_k, pi~_k)`` -> ``[B]`` (exact)."""
+        g, h = self.squashed, other.squashed
+        block_kl = _gaussian_kl(g.mean, g.log_std, h.mean, h.log_std) @ self._blocks
+        return self.categorical.kl(other.categorical) + (self.categorical.probs * block_kl).sum(-1)
+
+    def entropy(self) -> Tensor:
+        """``H(p) + sum_k p_k H(pi_k)``, each ``H(pi_k)`` a one-sample estimate -> ``[B]``."""
+        return self.categorical.entropy() - (self.categorical.probs * self.rsample_blocks()[1]).sum(-1)
+
+    @torch.no_grad()
+    def sample(self, generator: torch.Generator | None = None) -> Tensor:
+        """The choice, then every block's parameters (as :meth:`Hierarchical.sample`) -> ``[B, 1 + S]``."""
+        k = self.categorical.sample(generator)
+        x = self.squashed.sample(generator)
+        return torch.cat([k.to(x.dtype).unsqueeze(-1), x], dim=-1)
+
+    @torch.no_grad()
+    def mode(self) -> Tensor:
+        """The most likely choice with every block at ``tanh(mean)`` -> ``[B, 1 + S]``."""
+        x = self.squashed.mode()
+        return torch.cat([self.categorical.mode().to(x.dtype).unsqueeze(-1), x], dim=-1)
+
+    def detach(self) -> HybridSquashed:
+        """Snapshot with detached, copied parameters."""
+        s = self.squashed.detach()
+        return HybridSquashed(self.categorical.log_p.detach().clone(), s.mean, s.log_std, self.param_dims)
 
 
 def flat_to_tuple(action: np.ndarray | Tensor, param_dims: Sequence[int]) -> tuple:

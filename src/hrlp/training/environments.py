@@ -16,7 +16,7 @@ from hrlp.arm.batched import VECTORISED, BatchedFactory, make_batched
 from hrlp.arm.handover import drive
 from hrlp.arm.manager import batched_manager
 from hrlp.arm.registry import TASKS, ArmEnvFactory, make, probe_task
-from hrlp.config import MacroSpec, TrainConfig, auto_workers
+from hrlp.config import OFF_POLICY, MacroSpec, TrainConfig, auto_workers
 from hrlp.envs.actions import NormalisedParameters, is_parameterised, make_normalised
 from hrlp.envs.check import gym_kwargs
 from hrlp.envs.vector import VectorConstructor, VectorEnv
@@ -111,11 +111,11 @@ def batchable_task(task: str) -> bool:
 
 def resolve_config(cfg: TrainConfig) -> TrainConfig:
     """``cfg`` with a concrete number of sampling workers and a concrete backend: ``workers`` 0 becomes
-    :func:`hrlp.config.auto_workers`'s count for ``num_envs``, ``backend`` ``auto`` the batched backend for an arm task
-    (:func:`batchable_task`) and the serial one otherwise; what a run records and resumes with. Raises ValueError for
-    ``batched`` where it does not apply."""
-    if cfg.workers == 0:
-        cfg = dataclasses.replace(cfg, workers=auto_workers(cfg.num_envs))
+    :func:`hrlp.config.auto_workers`'s count for ``num_envs`` (1 for an off-policy run: it samples in its own process),
+    ``backend`` ``auto`` the batched backend for an arm task (:func:`batchable_task`) and the serial one otherwise; what
+    a run records and resumes with. Raises ValueError for ``batched`` where it does not apply."""
+    if cfg.workers == 0:  # an off-policy run samples in its own process
+        cfg = dataclasses.replace(cfg, workers=1 if cfg.algo in OFF_POLICY else auto_workers(cfg.num_envs))
     batchable = batchable_task(cfg.task)
     if cfg.backend == "auto":
         cfg = dataclasses.replace(cfg, backend="batched" if batchable else "serial")

@@ -19,10 +19,11 @@ from hrlp.checkpoint import (
     load_module,
     read_run_checkpoint,
 )
-from hrlp.config import TrainConfig
+from hrlp.config import OFF_POLICY, TrainConfig
 from hrlp.envs.vector import VectorEnv
 from hrlp.policies.mlp import GaussianPolicy, Policy, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
+from hrlp.policies.sac import SACActor
 from hrlp.rollout import (
     action_decoder,
     build_vector_env,
@@ -139,6 +140,14 @@ def load_trained(run_dir: Path) -> TrainedPolicy:
     return TrainedPolicy(policy, normalizer, TrainConfig.from_json(meta["config"]), meta)  # checked by load_policy
 
 
+def make_policy(cfg: TrainConfig, obs_dim: int, space: gym.Space) -> Policy:
+    """The policy network of ``cfg``'s runs for ``space``: SAC's squashed actor for an off-policy run, else
+    :func:`~hrlp.policies.mlp.policy_for_space`'s (with ``cfg.init_log_std``)."""
+    if cfg.algo in OFF_POLICY:
+        return SACActor(obs_dim, space, cfg.sac.hidden)
+    return policy_for_space(obs_dim, space, cfg.hidden, cfg.init_log_std)
+
+
 def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, Any]]:
     """The trained policy (flat or Manager) and its frozen observation normaliser from a checkpoint directory."""
     tensors, meta, cfg = read_run_checkpoint(directory)
@@ -147,7 +156,7 @@ def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, A
     if isinstance(env, MacroEnv):
         check_skill_hashes(meta.get("skills", {}), skill_hashes(env.skills), directory)
     check_action_units(meta, action_units(env), directory)
-    policy = policy_for_space(obs_dim, env.action_space, cfg.hidden)
+    policy = make_policy(cfg, obs_dim, env.action_space)
     env.close()
     load_module("policy", policy, tensors)
     normalizer = RunningNormalizer.from_config(
@@ -184,7 +193,10 @@ def policy_skill_files(run_dir: str | Path, *, param: str | None = "desired_goal
     parts it reads, its parameter part and box, its action bounds and its early end. Raises a one-line ValueError for a
     run that cannot be one (checked as :func:`from_run` checks it)."""
     run = Path(run_dir)
-    _, parts, param, box, action_space = _run_skill(run, param, low, high)
+    trained, parts, param, box, action_space = _run_skill(run, param, low, high)
+    if not isinstance(trained.policy, GaussianPolicy):
+        raise ValueError(f"{run}: a library file holds a Gaussian policy trained with --algo trpo or ppo; this run "
+                         f"trained with --algo {trained.config.algo} (hrlp.training.from_run makes its skill)")  # fmt: skip
     checked = dict(k=k, done_part=done_part, done_within=done_within)  # PolicySkill checks them
     skill = PolicySkill(run.name, parts, param, box, lambda x: x, action_space.low, action_space.high, **checked)  # type: ignore[arg-type]
     tensors, meta, cfg = read_run_checkpoint(run / "checkpoint")
@@ -218,7 +230,7 @@ def _run_skill(run: Path, param: str | None, low: object, high: object) -> _RunS
     env = trained.make_env()
     space, action_space = _own_observation_space(env), env.action_space
     env.close()
-    if not isinstance(action_space, gym.spaces.Box) or not isinstance(trained.policy, GaussianPolicy):
+    if not isinstance(action_space, gym.spaces.Box):
         raise ValueError(f"{run}: a skill emits Box actions; this run's action space is {action_space}")
     layout = ObsLayout.of_space(space)
     parts = [(n, layout.width(n)) for n in layout.names]

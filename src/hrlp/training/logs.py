@@ -71,7 +71,9 @@ def progress_line(label: str, stats: dict[str, float], total: int, elapsed_s: fl
     out += f", return {stats['return_mean']:.1f}"
     if not math.isnan(stats["success_rate"]):
         out += f", success {stats['success_rate']:.2f}"
-    return out + f", kl {update_stat(stats, 'kl'):.4f}, {stats['time/steps_per_s']:.0f} steps/s, {elapsed_s:.0f} s"
+    if not math.isnan(kl := update_stat(stats, "kl")):  # an off-policy update has no KL step
+        out += f", kl {kl:.4f}"
+    return out + f", {stats['time/steps_per_s']:.0f} steps/s, {elapsed_s:.0f} s"
 
 
 def truncate_log(path: Path, iteration: int) -> None:

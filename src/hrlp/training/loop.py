@@ -31,8 +31,8 @@ from hrlp.checkpoint import (
     save_checkpoint,
     unpack_generators,
 )
-from hrlp.config import TrainConfig
-from hrlp.policies.mlp import GaussianPolicy, ValueNet, policy_for_space
+from hrlp.config import OFF_POLICY, TrainConfig
+from hrlp.policies.mlp import GaussianPolicy, ValueNet
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import (
     Batch,
@@ -44,8 +44,9 @@ from hrlp.rollout import (
 )
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
-from hrlp.training.loading import check_action_units, warm_start
+from hrlp.training.loading import check_action_units, make_policy, warm_start
 from hrlp.training.logs import RunLogger, progress_line, truncate_log, update_stat
+from hrlp.training.offpolicy import OffPolicyTrainer
 
 
 class Trainer:
@@ -68,7 +69,7 @@ class Trainer:
         obs_dim = int(np.prod(probe.observation_space.shape))
         self.skill_hashes = skill_hashes(probe.skills) if isinstance(probe, MacroEnv) else {}
         self.action_units = action_units(probe)
-        self.policy = policy_for_space(obs_dim, probe.action_space, cfg.hidden, cfg.init_log_std)
+        self.policy = make_policy(cfg, obs_dim, probe.action_space)
         self.obs_dim = obs_dim
         probe.close()
         self.value_net = ValueNet(obs_dim, cfg.hidden)
@@ -220,7 +221,11 @@ class Trainer:
         On CPU, with hrlp tasks (whose environments save their exact state), the resumed run produces the same
         numbers as an uninterrupted one. Other Gymnasium environments restart their episodes.
         """
-        tensors, meta, cfg = read_run_checkpoint(directory, {"sampler": dict})
+        return cls.restore(directory, *read_run_checkpoint(directory, {"sampler": dict}))
+
+    @classmethod
+    def restore(cls, directory: Path, tensors: dict[str, torch.Tensor], meta: dict[str, Any], cfg: TrainConfig) -> Trainer:
+        """The trainer of a checkpoint read from ``directory`` (:meth:`resume`)."""
         trainer = cls(cfg, from_checkpoint=True)
         check_skill_hashes(meta.get("skills", {}), trainer.skill_hashes, directory)
         check_action_units(meta, trainer.action_units, directory)
@@ -240,6 +245,10 @@ class Trainer:
             trainer.pending_value_fit = (tensors["pending_value_fit.obs"], tensors["pending_value_fit.returns"])
         return trainer
 
+    def close(self) -> None:
+        """Stop the sampler (and its worker processes)."""
+        self.sampler.close()
+
     def _generators(self) -> dict[str, torch.Generator]:
         # Worker processes keep their own generators, saved with the sampler's state.
         gen = self.sampler.generator
@@ -257,6 +266,12 @@ class Trainer:
                                      f"{float(tensor[where])}; refusing to save it over the checkpoint in "
                                      f"{directory}")  # fmt: skip
         return save_checkpoint(directory, tensors, meta)
+
+
+def resume_trainer(directory: Path) -> Trainer | OffPolicyTrainer:
+    """The trainer of the checkpoint in ``directory``, on-policy or off-policy as its run was trained."""
+    tensors, meta, cfg = read_run_checkpoint(directory, {"sampler": dict})
+    return (OffPolicyTrainer if cfg.algo in OFF_POLICY else Trainer).restore(directory, tensors, meta, cfg)
 
 
 def batch_values(value_net: Callable[[torch.Tensor], torch.Tensor], batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
@@ -418,11 +433,11 @@ def train(
         if resume:
             if not checkpoint_exists(checkpoint):
                 raise ValueError(f"--resume: {run_dir} has no checkpoint to continue from")
-            trainer = Trainer.resume(checkpoint)
+            trainer = resume_trainer(checkpoint)
         else:
             if checkpoint_exists(checkpoint):
                 raise ValueError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
-            trainer = Trainer(cfg)
+            trainer = OffPolicyTrainer(cfg) if cfg.algo in OFF_POLICY else Trainer(cfg)
             cfg = trainer.cfg  # with the number of workers it uses: config.json and the checkpoint record it
         logger: RunLogger | None = None
         try:  # from here on, whatever fails, the sampler (and its worker processes) is closed
@@ -463,7 +478,7 @@ def train(
         finally:
             if logger is not None:
                 logger.close()
-            trainer.sampler.close()
+            trainer.close()
 
 
 @dataclass
@@ -547,7 +562,9 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
                 status += f"  success {st['success_rate']:.2f}"
             if cfg.episodes is not None:
                 status += f"  episodes {int(st['episodes_total']):,}/{cfg.episodes:,}"
-            status += f"  kl {update_stat(st, 'kl'):.4f}  {st['time/steps_per_s']:.0f} steps/s"
+            if not math.isnan(kl := update_stat(st, "kl")):
+                status += f"  kl {kl:.4f}"
+            status += f"  {st['time/steps_per_s']:.0f} steps/s"
             done = int(st["env_steps"])
             bar_total = max(bar_total, done)  # a Manager's last iteration passes cfg.steps: the bar says by how much
             assert bar is not None
