@@ -413,8 +413,13 @@ _LEFT_OUT: dict[type, dict[str, str]] = {
 _OPTION_NAMES = {(ValueFitConfig, "max_iter"): "value_iters", (ValueFitConfig, "fraction"): "value_fraction"}
 """Options named otherwise than their field: the value fit's first two options predate the generated ones."""
 
-_NESTED: dict[type, str] = {AdvantageConfig: "advantage", TRPOConfig: "trpo", PPOConfig: "ppo", SACConfig: "sac",
-                            ValueFitConfig: "value"}
+_NESTED: dict[type, str] = {
+    AdvantageConfig: "advantage",
+    TRPOConfig: "trpo",
+    PPOConfig: "ppo",
+    SACConfig: "sac",
+    ValueFitConfig: "value",
+}
 """TrainConfig's nested records, by the field that holds each."""
 
 _PREFIXES = {ValueFitConfig: "value_", PPOConfig: "ppo_", SACConfig: "sac_"}
@@ -922,10 +927,12 @@ def _check_numbers(ctx: typer.Context) -> None:
     if p["batch_steps"] < p["num_envs"]:
         return  # TrainConfig says so in its own words
     steps_per_env = -(-p["batch_steps"] // p["num_envs"])
-    problems = [] if p["algo"] in OFF_POLICY else [  # the Fisher matrix and the baseline fit are on-policy
-        bounds.fraction_problem("fisher_fraction", p["fisher_fraction"], steps_per_env * p["num_envs"], "decisions"),
-        bounds.fraction_problem("value fraction", p["value_fraction"], steps_per_env, "time steps"),
-    ]
+    problems = []
+    if p["algo"] not in OFF_POLICY:  # the Fisher matrix and the baseline fit are on-policy
+        problems += [
+            bounds.fraction_problem("fisher_fraction", p["fisher_fraction"], steps_per_env * p["num_envs"], "decisions"),
+            bounds.fraction_problem("value fraction", p["value_fraction"], steps_per_env, "time steps"),
+        ]
     if ctx.info_name == "train-manager":
         episode = p["episode_steps"] or default_episode_steps()
         problems += [

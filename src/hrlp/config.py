@@ -458,10 +458,12 @@ class TrainConfig:
         if "episode_steps" in self.task_kwargs:
             raise ValueError("give the episode length as episode_steps (--episode-steps), not as a task argument")
         batch = self.steps_per_env * self.num_envs
-        problems = [] if self.algo in OFF_POLICY else [  # the Fisher matrix and the baseline fit are on-policy
-            bounds.fraction_problem("fisher_fraction", self.trpo.fisher_fraction, batch, "decisions"),
-            bounds.fraction_problem("value fraction", self.value.fraction, self.steps_per_env, "time steps"),
-        ]
+        problems = []
+        if self.algo not in OFF_POLICY:  # the Fisher matrix and the baseline fit are on-policy
+            problems += [
+                bounds.fraction_problem("fisher_fraction", self.trpo.fisher_fraction, batch, "decisions"),
+                bounds.fraction_problem("value fraction", self.value.fraction, self.steps_per_env, "time steps"),
+            ]
         if self.macro is not None:
             episode = self.episode_steps or bounds.DEFAULT_EPISODE_STEPS
             micro = None if self.macro.micro is None else self.macro.micro.duration

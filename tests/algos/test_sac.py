@@ -4,6 +4,7 @@ trains and evaluates one."""
 
 import dataclasses
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -15,8 +16,6 @@ from hrlp.cli import app
 from hrlp.config import MacroSpec, SACConfig, TrainConfig
 from hrlp.policies.sac import SACActor, TwinQ
 from hrlp.train import train
-
-import gymnasium as gym
 
 
 def test_the_hybrid_update_learns_the_best_choice_and_its_parameter():
@@ -47,7 +46,7 @@ def test_sac_settings_are_checked():
                 {"choice_entropy": 2.0}, {"her_future": -1}, {"hidden": ()}, {"init_alpha": float("nan")}):  # fmt: skip
         with pytest.raises(ValueError):
             SACConfig(**bad)
-    with pytest.raises(ValueError, match="^algo sac samples in the training process: workers must be 1"):
+    with pytest.raises(ValueError, match=r"^algo sac samples in the training process: workers must be 1"):
         TrainConfig(task="Pendulum-v1", algo="sac", workers=2, num_envs=4, batch_steps=8)
     with pytest.raises(ValueError, match="init_from"):
         TrainConfig(task="Reacher", algo="sac", init_from="reacher")
@@ -123,5 +122,7 @@ def test_the_command_line_trains_a_sac_run_with_its_defaults_noted_and_evaluates
     assert "sac/critic_loss" in (run / "progress.csv").read_text().splitlines()[0]
     e = CliRunner().invoke(app, ["eval", str(run), "--episodes", "5"])
     assert e.exit_code == 0, e.output
-    bad = CliRunner().invoke(app, ["train", "Pendulum-v1", "--algo", "sac", "--workers", "2", "--run-dir", str(tmp_path / "x")])
+    bad = CliRunner().invoke(
+        app, ["train", "Pendulum-v1", "--algo", "sac", "--workers", "2", "--run-dir", str(tmp_path / "x")]
+    )
     assert bad.exit_code != 0 and "workers must be 1" in bad.output and "Traceback" not in bad.output

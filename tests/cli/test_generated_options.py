@@ -25,8 +25,7 @@ from hrlp.config import AdvantageConfig, PPOConfig, SACConfig
 from hrlp.train import TrainConfig, read_run_checkpoint
 
 CONFIGS = (TrainConfig, AdvantageConfig, TRPOConfig, PPOConfig, SACConfig, ValueFitConfig)
-LEFT_OUT = {(TrainConfig, name) for name in ("task", "advantage", "trpo", "ppo", "sac", "value", "macro",
-                                                             "task_kwargs")}
+LEFT_OUT = {(TrainConfig, name) for name in ("task", "advantage", "trpo", "ppo", "sac", "value", "macro", "task_kwargs")}
 """The fields that are not generated options (cli._LEFT_OUT says why)."""
 VALUE_FLAGS = {"max_iter": "--value-iters", "fraction": "--value-fraction", "l2_coef": "--value-l2-coef",
                "history_size": "--value-history-size"}  # fmt: skip

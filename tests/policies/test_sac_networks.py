@@ -29,7 +29,7 @@ def test_squashed_gaussian_log_prob_matches_torchs_tanh_transformed_normal():
 
 def test_the_reparameterised_sample_carries_gradients_and_a_large_pre_tanh_value_stays_finite():
     mean = torch.tensor([[0.0, 30.0]], requires_grad=True)
-    a, lp = SquashedGaussian(mean, torch.zeros(1, 2)).rsample(torch.Generator().manual_seed(0))
+    _, lp = SquashedGaussian(mean, torch.zeros(1, 2)).rsample(torch.Generator().manual_seed(0))
     lp.sum().backward()
     assert torch.isfinite(lp).all() and mean.grad is not None and torch.isfinite(mean.grad).all()
 
@@ -69,7 +69,9 @@ def test_hybrid_rsample_blocks_gives_each_blocks_log_density():
     each = SquashedGaussian(d.squashed.mean, d.squashed.log_std)
     u = torch.atanh(x.clamp(-0.999999, 0.999999))
     per_column = _reference(each.mean, each.log_std).log_prob(torch.tanh(u).clamp(-0.999999, 0.999999))
-    assert torch.allclose(lp[:, 0], per_column[:, 0], atol=1e-3) and torch.allclose(lp[:, 2], per_column[:, 1:].sum(-1), atol=1e-3)
+    assert torch.allclose(lp[:, 0], per_column[:, 0], atol=1e-3) and torch.allclose(
+        lp[:, 2], per_column[:, 1:].sum(-1), atol=1e-3
+    )
 
 
 def test_the_actor_acts_in_a_boxs_own_bounds_and_maps_them_back():

@@ -132,4 +132,3 @@ class TwinQ(nn.Module):
         k = torch.arange(self.n, device=obs.device).repeat_interleave(b)
         z = self._inputs(obs.repeat(self.n, 1), k, x.repeat(self.n, 1))
         return self.q1(z).reshape(self.n, b).T, self.q2(z).reshape(self.n, b).T
-

@@ -232,4 +232,3 @@ class OffPolicyTrainer:
         self.sampler.close()
         if self._scorer is not None:
             self._scorer.close()
-
