@@ -104,6 +104,8 @@ def test_the_saved_state_restores_a_buffer_that_draws_the_same_minibatches():
         ReplayBuffer(40, 2, 5, 1, GAMMA).load_state(tensors, meta)
 
 
-def test_memory_is_stated_per_transition():
+def test_memory_is_stated_per_transition_and_a_million_manager_decisions_fit_in_2_gb():
     b = ReplayBuffer(1000, 4, 24, 10, GAMMA)
     assert b.nbytes() == 1000 * (4 * (2 * 24 + 10 + 2) + 11)
+    # The arm's Manager with gripper, reacher and the micro-action: 24 observation numbers, actions [k, 3 + 9 parameters].
+    assert ReplayBuffer(1_000_000, 4, 24, 13, GAMMA).nbytes() == 263_000_000 < 2 * 2**30
