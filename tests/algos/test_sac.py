@@ -26,7 +26,7 @@ def test_the_hybrid_update_learns_the_best_choice_and_its_parameter():
     actor = SACActor(2, space, (32, 32))
     update = SACUpdate(actor, TwinQ(2, actor.param_dims, (32, 32)), SACConfig(lr=3e-3, init_alpha=0.05), seed=0)
     g = torch.Generator().manual_seed(1)
-    for _ in range(600):
+    for _ in range(300):
         obs = torch.randn(128, 2, generator=g)
         a = actor.hybrid(obs).sample(g)
         k, x = a[:, 0].long(), a[:, 1:].gather(1, a[:, :1].long())[:, 0]
@@ -126,3 +126,11 @@ def test_the_command_line_trains_a_sac_run_with_its_defaults_noted_and_evaluates
         app, ["train", "Pendulum-v1", "--algo", "sac", "--workers", "2", "--run-dir", str(tmp_path / "x")]
     )
     assert bad.exit_code != 0 and "workers must be 1" in bad.output and "Traceback" not in bad.output
+
+
+def test_a_discrete_space_goes_through_the_same_learner(tmp_path):
+    sac = SACConfig(batch_size=16, learning_starts=20, hidden=(16,))
+    cfg = TrainConfig(task="CartPole-v1", algo="sac", sac=sac, steps=120, batch_steps=60, num_envs=2, seed=0)
+    last = list(train(cfg, tmp_path / "cartpole"))[-1]
+    assert last["sac/gradient_steps"] == 100 and np.isfinite(last["sac/critic_loss"])
+    assert last["sac/params_log_prob"] == 0 and last["sac/alpha_params"] == pytest.approx(0.1)  # no parameters to tune
