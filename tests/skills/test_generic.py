@@ -15,12 +15,13 @@ from typer.testing import CliRunner
 
 import goal_envs
 from hrlp.cli import app
-from hrlp.config import MacroSpec, MicroAction, TrainConfig
+from hrlp.config import MacroSpec, MicroAction, SACConfig, TrainConfig
 from hrlp.evaluate import evaluate_run
 from hrlp.skills import DirectControl, ObsLayout, ObsView, ParamBox, ScriptedSkill
 from hrlp.skills.core import Hierarchy, decide, initiated
+from hrlp.skills.library import SkillLibrary
 from hrlp.skills.macro_env import MacroEnv
-from hrlp.train import env_factory, train_with_progress
+from hrlp.train import env_factory, train, train_with_progress
 from hrlp.training import from_run
 from hrlp.training.sources import resolve_skill
 
@@ -202,6 +203,21 @@ def test_a_run_on_a_dict_environment_becomes_a_library_skill_that_acts_as_the_ru
     assert skill.done(view, near).all() and direct.done(view, near) is None
     listed = CliRunner().invoke(app, ["skills", "list", "--library", str(lib)], env={"COLUMNS": "250"})
     assert listed.exit_code == 0 and "│ point " in listed.output and TASK in listed.output, listed.output
+
+
+def test_a_sac_run_becomes_a_library_skill_that_acts_as_the_run(tmp_path):
+    sac = SACConfig(batch_size=16, learning_starts=20, hidden=(16,))
+    list(train(TrainConfig(task=TASK, algo="sac", sac=sac, steps=80, batch_steps=40, num_envs=2, seed=0), tmp_path / "sac"))
+    lib = tmp_path / "lib"
+    r = CliRunner().invoke(app, ["skills", "add", str(tmp_path / "sac"), "--name", "sac_point", "--library", str(lib)])
+    assert r.exit_code == 0, r.output
+    skill, direct = resolve_skill("sac_point", lib), from_run(tmp_path / "sac", "sac_point")
+    assert SkillLibrary(lib).manifest("sac_point")["actor"] == "squashed"
+    env = gym.make(TASK)
+    layout = ObsLayout.of_space(env.observation_space)
+    rows = np.stack([gym.spaces.flatten(env.observation_space, env.observation_space.sample()) for _ in range(5)])
+    view, params = ObsView(rows, layout, np.arange(5)), np.random.default_rng(0).uniform(-1, 1, (5, 2))
+    np.testing.assert_allclose(skill.act(view, params), direct.act(view, params), atol=1e-5)
 
 
 def test_a_learned_skill_that_does_not_fit_the_environment_is_refused_in_one_line(trained):

@@ -45,7 +45,7 @@ from hrlp.checkpoint import (
     read_checkpoint,
     save_checkpoint,
 )
-from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
+from hrlp.policies.mlp import GaussianPolicy, NumpyMLP, mlp
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.skills.core import ParamBox, Skill
 from hrlp.skills.policy import PolicySkill
@@ -117,7 +117,8 @@ def _integer(m: dict[str, Any], key: str, low: int, high: int, what: str) -> int
 class SkillFormat:
     """How a library reads one kind of skill file: ``check(manifest)`` checks every number of a manifest (raising
     :class:`SkillProblem`, one line) before any tensor is read; ``build(name, tensors, manifest, sha256)`` makes the frozen
-    skill from checked files. Every format stores a :class:`~hrlp.policies.mlp.GaussianPolicy`'s weights and its
+    skill from checked files. Every format stores a :class:`~hrlp.policies.mlp.GaussianPolicy`'s weights (a
+    :data:`POLICY_FORMAT` manifest whose ``actor`` is ``squashed``: a Box :class:`~hrlp.policies.sac.SACActor`'s) and its
     normaliser (:func:`_expected_tensors`)."""
 
     check: Callable[[dict[str, Any]], object]
@@ -126,6 +127,8 @@ class SkillFormat:
 
 #: The ``format`` of a skill file holding a policy trained on any Gymnasium environment (a :class:`PolicySkill`).
 POLICY_FORMAT = "policy"
+#: A policy skill's ``actor``: the Gaussian of TRPO and PPO runs (the default), or SAC's tanh-squashed one.
+GAUSSIAN_ACTOR, SQUASHED_ACTOR = "gaussian", "squashed"
 #: The format of a manifest that names none: skill files were the arm's before formats had names (:mod:`hrlp.arm`).
 UNNAMED_FORMAT = "arm"
 _FORMATS: dict[str, SkillFormat] = {}
@@ -212,6 +215,8 @@ def _check_policy_manifest(m: dict[str, Any]) -> tuple[ParamBox, int, tuple[int,
                              or not (_number(done.get("within")) and 0 < done["within"] < math.inf)):  # fmt: skip
         raise SkillProblem(f"manifest's 'done' must be {{part: one of its parts, within: a positive distance}}, got "
                             f"{_short(done)}")  # fmt: skip
+    if m.get("actor", GAUSSIAN_ACTOR) not in (GAUSSIAN_ACTOR, SQUASHED_ACTOR):
+        raise SkillProblem(f"manifest's 'actor' must be {GAUSSIAN_ACTOR} or {SQUASHED_ACTOR}, got {_short(m.get('actor'))}")
     hidden = _check_network(m, obs_dim)
     return box, k, hidden
 
@@ -242,11 +247,13 @@ def _number(x: Any) -> bool:
 def _expected_tensors(m: dict[str, Any]) -> dict[str, tuple[int, ...]]:
     """The shape of every tensor of the network and normaliser that a (checked) manifest describes."""
     obs_dim, act_dim, hidden = m["obs_dim"], m["act_dim"], list(m["hidden"])
-    widths = [obs_dim, *hidden, act_dim]
-    out: dict[str, tuple[int, ...]] = {"policy.log_std": (act_dim,)}
-    for i in range(len(widths) - 1):  # mean_net is Linear, Tanh, Linear, Tanh, ..., Linear: linears at even indices
-        out[f"policy.mean_net.{2 * i}.weight"] = (widths[i + 1], widths[i])
-        out[f"policy.mean_net.{2 * i}.bias"] = (widths[i + 1],)
+    squashed = m.get("actor") == SQUASHED_ACTOR  # a SAC actor: means and log stds from one net, no log_std parameter
+    widths = [obs_dim, *hidden, 2 * act_dim if squashed else act_dim]
+    out: dict[str, tuple[int, ...]] = {} if squashed else {"policy.log_std": (act_dim,)}
+    net = "policy.net" if squashed else "policy.mean_net"
+    for i in range(len(widths) - 1):  # Linear, activation, Linear, activation, ..., Linear: linears at even indices
+        out[f"{net}.{2 * i}.weight"] = (widths[i + 1], widths[i])
+        out[f"{net}.{2 * i}.bias"] = (widths[i + 1],)
     out |= {"normalizer.count": (), "normalizer.mean": (obs_dim,), "normalizer.var": (obs_dim,)}
     return out
 
@@ -382,16 +389,39 @@ def frozen_network(tensors: dict[str, torch.Tensor], m: dict[str, Any], hidden: 
     return policy, norm
 
 
+def _squashed_net(
+    tensors: dict[str, torch.Tensor], obs_dim: int, hidden: tuple[int, ...], act_dim: int
+) -> torch.nn.Sequential:
+    """A SAC actor's network (ReLU layers, means then log stds) with the skill's weights loaded."""
+    net = mlp(obs_dim, 2 * act_dim, hidden, torch.nn.ReLU)
+    load_module("policy.net", net, tensors)
+    return net
+
+
 def _build_policy(name: str, tensors: dict[str, torch.Tensor], m: dict[str, Any], sha256: str) -> PolicySkill:
     """A policy skill (:data:`POLICY_FORMAT`) from its checked files: its mean action in NumPy on the frozen
     normaliser's output, clipped to its action bounds."""
     box, k, hidden = _check_policy_manifest(m)
-    policy, norm = frozen_network(tensors, m, hidden)
-    mean = NumpyMLP(policy.mean_net)
+    low, high = np.asarray(m["action_low"], np.float64), np.asarray(m["action_high"], np.float64)
+    stats = {key.removeprefix("normalizer."): v for key, v in tensors.items() if key.startswith("normalizer.")}
+    norm = RunningNormalizer.from_config(m["normalizer"], stats)
+    norm.freeze()
+    if m.get("actor") == SQUASHED_ACTOR:  # tanh of the means, mapped onto the action bounds (SACActor.act's mode)
+        net = NumpyMLP(_squashed_net(tensors, m["obs_dim"], hidden, m["act_dim"]))
+        act_dim, mid, half = m["act_dim"], (high + low) / 2, (high - low) / 2
+
+        def act(x: np.ndarray) -> np.ndarray:
+            return np.tanh(net(norm.normalize(x))[..., :act_dim]) * half + mid
+    else:
+        policy, _ = frozen_network(tensors, m, hidden)
+        mean = NumpyMLP(policy.mean_net)
+
+        def act(x: np.ndarray) -> np.ndarray:
+            return mean(norm.normalize(x))
+
     done = m.get("done") or {}
-    skill = PolicySkill(name, [tuple(p) for p in m["parts"]], m.get("param_part"), box,
-                        lambda x: mean(norm.normalize(x)), np.asarray(m["action_low"]), np.asarray(m["action_high"]),
-                        k=k, done_part=done.get("part"), done_within=done.get("within"))  # fmt: skip
+    skill = PolicySkill(name, [tuple(p) for p in m["parts"]], m.get("param_part"), box, act, low, high, k=k,
+                        done_part=done.get("part"), done_within=done.get("within"))  # fmt: skip
     skill.content_hash = sha256
     return skill
 
@@ -402,9 +432,11 @@ register_format(POLICY_FORMAT, SkillFormat(_check_policy_manifest, _build_policy
 __all__ = [
     "DOMAINS_GROUP",
     "FLOAT_DTYPES",
+    "GAUSSIAN_ACTOR",
     "MAX_K",
     "POLICY_FORMAT",
     "SKILL_LIMITS",
+    "SQUASHED_ACTOR",
     "SkillFormat",
     "SkillLibrary",
     "SkillProblem",

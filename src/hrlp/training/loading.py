@@ -29,6 +29,7 @@ from hrlp.rollout import (
     build_vector_env,
 )
 from hrlp.skills.core import ObsLayout, ParamBox
+from hrlp.skills.library import GAUSSIAN_ACTOR, SQUASHED_ACTOR
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.skills.policy import PolicySkill, param_box
 from hrlp.training.environments import (
@@ -194,9 +195,7 @@ def policy_skill_files(run_dir: str | Path, *, param: str | None = "desired_goal
     run that cannot be one (checked as :func:`from_run` checks it)."""
     run = Path(run_dir)
     trained, parts, param, box, action_space = _run_skill(run, param, low, high)
-    if not isinstance(trained.policy, GaussianPolicy):
-        raise ValueError(f"{run}: a library file holds a Gaussian policy trained with --algo trpo or ppo; this run "
-                         f"trained with --algo {trained.config.algo} (hrlp.training.from_run makes its skill)")  # fmt: skip
+    squashed = isinstance(trained.policy, SACActor)
     checked = dict(k=k, done_part=done_part, done_within=done_within)  # PolicySkill checks them
     skill = PolicySkill(run.name, parts, param, box, lambda x: x, action_space.low, action_space.high, **checked)  # type: ignore[arg-type]
     tensors, meta, cfg = read_run_checkpoint(run / "checkpoint")
@@ -212,7 +211,8 @@ def policy_skill_files(run_dir: str | Path, *, param: str | None = "desired_goal
         "action_high": [float(v) for v in np.asarray(action_space.high, np.float64).reshape(-1)],
         "obs_dim": int(meta["obs_dim"]),
         "act_dim": int(meta["act_dim"]),
-        "hidden": list(cfg.hidden),
+        "actor": SQUASHED_ACTOR if squashed else GAUSSIAN_ACTOR,
+        "hidden": list(cfg.sac.hidden if squashed else cfg.hidden),
         "normalizer": meta["normalizer"],
         "trained": {"config": meta["config"], "iteration": meta["iteration"], "env_steps": meta["env_steps"]},
     }
