@@ -90,12 +90,12 @@ def test_goals_are_relabelled_on_a_goal_conditioned_environment_for_flat_runs_an
     from hrlp.training.offpolicy import OffPolicyTrainer
 
     sac = SACConfig(batch_size=32, learning_starts=16, hidden=(16,))
-    flat = OffPolicyTrainer(TrainConfig(task="tests.goal_envs:PointGoal-v0", algo="sac", sac=sac, num_envs=2,
+    flat = OffPolicyTrainer(TrainConfig(task="goal_envs:PointGoal-v0", algo="sac", sac=sac, num_envs=2,
                                         batch_steps=40, seed=0))  # fmt: skip
-    macro = MacroSpec(skills=("tests.goal_envs:reach",))
-    manager = OffPolicyTrainer(TrainConfig(task="tests.goal_envs:PointGoal-v0", algo="sac", sac=sac, macro=macro,
+    macro = MacroSpec(skills=("goal_envs:reach",))
+    manager = OffPolicyTrainer(TrainConfig(task="goal_envs:PointGoal-v0", algo="sac", sac=sac, macro=macro,
                                            num_envs=2, batch_steps=16, seed=0))  # fmt: skip
-    off = OffPolicyTrainer(TrainConfig(task="tests.goal_envs:PointGoal-v0", algo="sac", num_envs=2, batch_steps=16,
+    off = OffPolicyTrainer(TrainConfig(task="goal_envs:PointGoal-v0", algo="sac", num_envs=2, batch_steps=16,
                                        sac=dataclasses.replace(sac, her_future=0)))  # fmt: skip
     try:
         assert flat.relabels and manager.relabels and not off.relabels
