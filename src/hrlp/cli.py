@@ -621,6 +621,7 @@ def train(
         notes = [_off_policy_defaults(ctx)] if settings["algo"] in OFF_POLICY else [_episode_length_defaults(ctx, task)]
         notes.append(_small_batch_defaults(ctx))
         _check_numbers(ctx)
+        ctx.meta["start_notes"] = [_few_updates_note(ctx, task)]  # printed once the run is set up (an error stays one line)
         _check_task(task, settings["episode_steps"], task_arg, ctx)
         for note in filter(None, notes):  # after the checks: an error stays the one line
             err_console.print(note, soft_wrap=True, highlight=False)
@@ -842,7 +843,8 @@ def _train(ctx: typer.Context, macro: Any, run_dir: Path | None, resume: bool, t
         raise ValueError(str(e)) from None
     kind = "train-manager" if cfg.macro is not None else "train"
     try:  # errors end as one line from the top-level handler (_OneLineErrors)
-        summary = train_with_progress(cfg, out, resume, err_console, f"{kind} {cfg.task}")
+        summary = train_with_progress(cfg, out, resume, err_console, f"{kind} {cfg.task}",
+                                      notes=[n for n in ctx.meta.get("start_notes", []) if n])  # fmt: skip
     except StorageError:
         raise
     except OSError as e:  # a file system error not already named by hrlp's writers
@@ -866,16 +868,76 @@ def _episode_length_defaults(ctx: typer.Context, task: str) -> str:
     if not left_out or task.removeprefix("hrlp/").removesuffix("-v0") in TASKS:
         return ""
     try:
-        length = declared_episode_steps(task)
+        length = declared_episode_steps(task)  # the environment's own declaration, not a --episode-steps cut
+        measured = length is None
+        if measured:  # nothing declares it: a few episodes under random actions measure it
+            length = _measured_episode_steps(task, ctx)
     except ValueError:
-        return ""  # an unknown task: _check_task says so
+        return ""  # an unknown task or bad arguments: _check_task says so
     if length is None or length > SHORT_EPISODE_STEPS:
         return ""
     ctx.params.update({name: SHORT_EPISODE_SETTINGS[name] for name in left_out})
     shown = " ".join(f"--{name.replace('_', '-')} {SHORT_EPISODE_SETTINGS[name]:g}" for name in left_out)
     plural = "s" if length != 1 else ""
-    return (f"note: {task}'s episodes last at most {length:,} decision{plural}: short-episode settings {shown} (give the "
-            "options to choose others; docs/training.md)")  # fmt: skip
+    how = f"lasted at most {length:,} decision{plural} under random actions" if measured else (
+        f"last at most {length:,} decision{plural}")  # fmt: skip
+    return (f"note: {task}'s episodes {how}: short-episode settings {shown} (give the options to choose others; "
+            "docs/training.md)")  # fmt: skip
+
+
+def _measured_episode_steps(task: str, ctx: typer.Context) -> int | None:
+    """:func:`hrlp.envs.check.measured_episode_steps` of the task with the command's task arguments (None if it cannot
+    be built: _check_task then says why in one line)."""
+    import gymnasium as gym
+
+    from hrlp.envs.check import measured_episode_steps, registered_gym_id
+
+    if "measured_episode_steps" in ctx.meta:  # measured once per command
+        return ctx.meta["measured_episode_steps"]
+    length = None
+    try:
+        env = gym.make(registered_gym_id(task), **parse_task_args(ctx.params.get("task_arg")))
+    except Exception:  # _check_task names the problem
+        return None
+    try:
+        length = measured_episode_steps(env, ctx.params["seed"])
+    except Exception:  # the environment's own fault: the run itself reports it with its context
+        pass
+    finally:
+        env.close()
+    ctx.meta["measured_episode_steps"] = length
+    return length
+
+
+def _few_updates_note(ctx: typer.Context, task: str) -> str:
+    """One line when a fresh on-policy run's budget allows fewer than :data:`~hrlp.envs.check.FEW_UPDATES` policy
+    updates ("" otherwise): the updates its --steps (or its --episodes, at the longest episode length declared or
+    measured) allow at its batch size, and the --batch-steps that would give that many."""
+    from hrlp.arm import TASKS
+    from hrlp.arm.registry import declared_episode_steps
+    from hrlp.envs.check import FEW_UPDATES
+
+    p = ctx.params
+    if p["algo"] in OFF_POLICY or p["batch_steps"] < p["num_envs"]:
+        return ""
+    batch = -(-p["batch_steps"] // p["num_envs"]) * p["num_envs"]
+    decisions, why = p["steps"], f"--steps {p['steps']:,}"
+    if p["episodes"] is not None:
+        try:
+            length = declared_episode_steps(task, p["episode_steps"])
+        except ValueError:
+            length = None
+        if length is None and task.removeprefix("hrlp/").removesuffix("-v0") not in TASKS:
+            length = _measured_episode_steps(task, ctx)
+        if length is not None and p["episodes"] * length < decisions:
+            decisions, why = p["episodes"] * length, f"--episodes {p['episodes']:,} of at most {length:,} decisions"
+    updates = max(1, decisions // batch)
+    if updates >= FEW_UPDATES:
+        return ""
+    better = max(p["num_envs"], decisions // FEW_UPDATES // p["num_envs"] * p["num_envs"])
+    plural = "s" if updates != 1 else ""
+    return (f"note: {why} allows about {updates} policy update{plural} of --batch-steps {p['batch_steps']:,}; fewer than "
+            f"{FEW_UPDATES} rarely learn: --batch-steps {better:,} gives {FEW_UPDATES}")  # fmt: skip
 
 
 OFF_POLICY_SETTINGS: dict[str, Any] = {"num_envs": 4, "batch_steps": 10_000}

@@ -119,6 +119,34 @@ last four are the paper's (:data:`hrlp.config.PAPER_SETTINGS`), with which these
 defaults are shown to learn as well on Reacher-v5, not on short episodes."""
 
 
+PROBE_EPISODES, PROBE_STEPS = 5, 2_000
+""":func:`measured_episode_steps` plays at most this many episodes and steps in all."""
+
+
+def measured_episode_steps(env: gym.Env, seed: int = 0) -> int | None:
+    """The longest of :data:`PROBE_EPISODES` episodes of ``env`` under uniformly random actions (seeded), for an
+    environment whose registration declares no episode length; None when they take more than :data:`PROBE_STEPS`
+    steps in all (long episodes: the defaults suit them). ``env`` is reset and stepped, not closed."""
+    env.action_space.seed(seed)
+    longest, total = 0, 0
+    for i in range(PROBE_EPISODES):
+        env.reset(seed=seed + i)
+        length = 0
+        while True:
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            length, total = length + 1, total + 1
+            if terminated or truncated:
+                break
+            if total >= PROBE_STEPS:
+                return None
+        longest = max(longest, length)
+    return longest
+
+
+FEW_UPDATES = 20
+"""A run whose budget allows fewer policy updates than this is told so before it starts (``hrlp train``)."""
+
+
 def dependency_line(env_id: str, error: Exception) -> str:
     """One line for a Gymnasium environment whose optional dependency is missing, naming the pip extra."""
     text = " ".join(str(error).split())

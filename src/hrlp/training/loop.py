@@ -10,7 +10,7 @@ import math
 import os
 import time
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -517,14 +517,14 @@ class RunSummary:
 
 
 def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, console: Any = None,
-                        description: str | None = None) -> RunSummary:  # fmt: skip
+                        description: str | None = None, notes: Sequence[str] = ()) -> RunSummary:  # fmt: skip
     """:func:`train` behind a rich progress bar on ``console`` (return, success, KL and steps/s so far); when
     ``console`` is not a terminal (output written to a file or a pipe), a :func:`progress_line` per iteration instead.
 
     Before the first iteration it prints what will actually run when that differs from ``cfg.steps``
     (:meth:`StepPlan.note`); the bar counts the run's real steps against the real total (a Manager's total, unknown
     until it ends, is ``cfg.steps`` until passed). Warnings (:data:`REJECTED_STEPS_WARNING` rejected TRPO steps in a
-    row) are printed above the bar. Returns the :class:`RunSummary`."""
+    row) are printed above the bar, and ``notes`` once the run is set up. Returns the :class:`RunSummary`."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -542,6 +542,8 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
         def started(plan: StepPlan) -> None:  # the bar appears once the run is set up (an error before: one line only)
             nonlocal start, bar_total, bar
             start, bar_total = plan.done, plan.total or max(plan.requested, plan.done)
+            for line in notes:
+                progress.console.print(line, soft_wrap=True, highlight=False)
             if cfg.episodes is None and (note := plan.note()) is not None:
                 progress.console.print(f"[bold]note:[/] {note}", soft_wrap=True)
             if cfg.episodes is not None:
