@@ -45,7 +45,7 @@ from hrlp.rollout import (
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
 from hrlp.training.loading import check_action_units, warm_start
-from hrlp.training.logs import RunLogger, progress_line, truncate_log, update_stat
+from hrlp.training.logs import RunLogger, progress_line, shown, truncate_log, update_stat
 
 
 class Trainer:
@@ -542,12 +542,12 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
             progress.console.print(f"[bold yellow]warning:[/] {message}", soft_wrap=True)
 
         for st in train(cfg, run_dir, resume=resume, on_start=started, on_warning=warned):
-            status = f"return {st['return_mean']:.1f}"
+            status = f"return {shown(st['return_mean'], '.1f')}"  # '-': no episode ended in the iteration
             if not math.isnan(st["success_rate"]):
                 status += f"  success {st['success_rate']:.2f}"
             if cfg.episodes is not None:
                 status += f"  episodes {int(st['episodes_total']):,}/{cfg.episodes:,}"
-            status += f"  kl {update_stat(st, 'kl'):.4f}  {st['time/steps_per_s']:.0f} steps/s"
+            status += f"  kl {shown(update_stat(st, 'kl'), '.4f')}  {st['time/steps_per_s']:.0f} steps/s"
             done = int(st["env_steps"])
             bar_total = max(bar_total, done)  # a Manager's last iteration passes cfg.steps: the bar says by how much
             assert bar is not None
