@@ -13,6 +13,7 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 from typer.core import TyperGroup
 
@@ -29,6 +30,7 @@ from hrlp.config import (
     auto_workers,
     field_docs,
 )
+from hrlp.stopping import Stopped, describing
 
 console = Console()
 err_console = Console(stderr=True, soft_wrap=True)  # one-line errors, never wrapped
@@ -41,8 +43,6 @@ def _fail(message: str) -> typer.Exit:
 
 def _error_exit(message: str, code: int = 2) -> int:
     """Print ``message`` as one line (``error: ...``, whitespace collapsed, never read as markup) on stderr."""
-    from rich.markup import escape
-
     err_console.print(f"[bold red]error:[/] {escape(' '.join(message.split()))}", highlight=False)
     return code
 
@@ -83,7 +83,9 @@ def _known_error_line(error: BaseException) -> str | None:
 class _OneLineErrors(TyperGroup):
     """The ``hrlp`` group: every error a user can cause ends the command with one line ``error: ...`` on stderr and
     exit code 2, never a traceback. Parse errors (click's usage errors, :class:`hrlp.cli_params.BoundError`) and the
-    known error types of :func:`_known_error_line` raised by any command are turned into that line here, once."""
+    known error types of :func:`_known_error_line` raised by any command are turned into that line here, once. A stop
+    signal (:class:`hrlp.stopping.Stopped`) ends it with the one line :meth:`~hrlp.stopping.Stopped.line` and exit code
+    128 + the signal."""
 
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:  # fmt: skip
@@ -104,6 +106,10 @@ class _OneLineErrors(TyperGroup):
             code = _error_exit(message, e.exit_code)
         except typer.Abort:
             code = _error_exit("aborted", 1)
+        except Stopped as e:  # SIGINT, SIGTERM or SIGHUP (hrlp.stopping): one line, and 128 + the signal
+            default = "" if _COMMAND_STARTED else "during start-up; nothing was written"
+            err_console.print(escape(" ".join(e.line(default).split())), highlight=False)
+            code = e.exit_code
         except Exception as e:
             if (line := _known_error_line(e)) is None:
                 raise
@@ -138,6 +144,12 @@ def _hrlp(
     ] = False,
 ) -> None:
     """Hierarchical Reinforcement Learning with Parameters: tasks, skills, Managers and the paper's experiments."""
+    global _COMMAND_STARTED
+    _COMMAND_STARTED = True
+
+
+_COMMAND_STARTED = False
+"""Whether a command has begun (its options parsed): a stop signal before that has written nothing."""
 
 
 def _given(ctx: typer.Context, name: str) -> bool:
@@ -234,7 +246,8 @@ def demo(
     check_rendering(480, 360)  # the video comes after minutes of training: a missing OpenGL driver fails now
     from hrlp.experiments.demo import run_demo
 
-    res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers)
+    with describing(lambda: f"; the same command continues the run in {out_dir} from its last checkpoint"):
+        res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers)
     console.print(f"success rate: {res.success}")
     console.print(f"video: {res.video}\nlearning curve: {res.plot}\nrun: {res.run_dir} (hrlp eval / hrlp render work on it)")
 
@@ -304,8 +317,10 @@ def reproduce(
         )
         err_console.print(f"{r['preset']} / {r['run']} / seed {r['seed']}: {what}, {r['env_steps']:,} steps{note}")
 
-    results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse,
-                       only=tuple(only or ()))  # fmt: skip
+    stopped = "; finished runs are kept, and the same command continues the others from their last checkpoints"
+    with describing(lambda: stopped):
+        results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse,
+                           only=tuple(only or ()))  # fmt: skip
     console.print(f"{len(results)} runs of {preset} in {out / preset}; tables: hrlp tables --root {out}")
 
 
@@ -578,8 +593,64 @@ def _apply_paper_settings(ctx: typer.Context) -> set[str]:
     return left_out
 
 
+def _stops_as_a_run(command: Callable[..., None]) -> Callable[..., None]:
+    """A training command whose stop by a signal names the run's last saved iteration and the command that continues
+    it (:func:`_run_stop_detail`)."""
+
+    @functools.wraps(command)
+    def run(**kwargs: Any) -> None:
+        ctx = kwargs["ctx"]
+        with describing(lambda: _run_stop_detail(ctx)):
+            command(**kwargs)
+
+    return run
+
+
+def _run_stop_detail(ctx: typer.Context) -> str:
+    """Where a training run stopped by a signal stands on disk, and what continues it: ``at iteration 41 (2,050,000
+    steps); hrlp train Reacher --run-dir runs/x --resume continues it``."""
+    import shlex
+
+    p = ctx.params
+    out = _run_dir(p)
+    saved = _saved_progress(out / "checkpoint")
+    if saved is None:
+        return "before its first iteration was saved: there is nothing to resume, and the same command starts the run again"
+    iteration, steps = saved
+    budgets = "".join(f" --{n} {p[n]}" for n in ("steps", "episodes") if p.get("resume") and _given(ctx, n))
+    return (f"at iteration {iteration} ({steps:,} steps); hrlp {ctx.info_name} {shlex.quote(p['task'])} --run-dir "
+            f"{shlex.quote(str(out))} --resume{budgets} continues it")  # fmt: skip
+
+
+def _run_dir(p: dict[str, Any]) -> Path:
+    """The run directory of a training command's options ``p`` (``--run-dir``, or ``runs/TASK-sSEED``)."""
+    return p.get("run_dir") or Path("runs") / f"{p['task'].replace('/', '_').replace(':', '_')}-s{p['seed']}"
+
+
+def _saved_progress(checkpoint: Path) -> tuple[int, int] | None:
+    """``(iteration, env_steps)`` of the training checkpoint at ``checkpoint`` (or of the whole ``.old`` copy a kill
+    between a save's renames leaves), None if there is none or it cannot be read. Reads only ``meta.json``."""
+    import json
+    import sys
+
+    path = checkpoint / "meta.json"
+    if not path.is_file() and "hrlp.checkpoint" in sys.modules:  # (no torch import here, at a stop during start-up)
+        from hrlp.checkpoint import CheckpointError, resolve_checkpoint
+
+        try:
+            path = resolve_checkpoint(checkpoint) / "meta.json"
+        except CheckpointError:
+            return None
+    try:
+        meta = json.loads(path.read_text())["meta"]
+        return int(meta["iteration"]), int(meta["env_steps"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 @app.command()
 @_settings_options()
+@_stops_as_a_run
 def train(
     ctx: typer.Context,
     task: Annotated[
@@ -609,6 +680,7 @@ def train(
 
 @app.command("train-manager")
 @_settings_options(batch_steps=5_000)  # the paper's Manager batch (TrainConfig's default is the flat runs' 50,000)
+@_stops_as_a_run
 def train_manager(
     ctx: typer.Context,
     task: Annotated[
@@ -783,7 +855,7 @@ def _train(ctx: typer.Context, macro: Any, run_dir: Path | None, resume: bool, t
 
     p = ctx.params
     task = p["task"]
-    out = run_dir or Path("runs") / f"{task.replace('/', '_').replace(':', '_')}-s{p['seed']}"
+    out = _run_dir(p)
     manager_command = macro is not None or ctx.info_name == "train-manager"
     try:
         if resume:
@@ -1129,8 +1201,9 @@ def eval_(
     from hrlp.evaluate import evaluate_with_progress
 
     try:  # errors end as one line from the top-level handler (_OneLineErrors)
-        ev = evaluate_with_progress(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic,
-                                    console=err_console, description=f"eval {run_dir}")  # fmt: skip
+        with describing(lambda: "during the evaluation; nothing was written"):
+            ev = evaluate_with_progress(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic,
+                                        console=err_console, description=f"eval {run_dir}")  # fmt: skip
     except StorageError:
         raise
     except OSError as e:

@@ -31,6 +31,7 @@ from hrlp.envs.vector import action_decoder as action_decoder  # re-exported: it
 from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.skills.macro_env import MacroEnv, manager_vector_env
+from hrlp.stopping import children_ignore_stop_signals, ignore_stop_signals
 
 DEFAULT_GAMMA = 0.99
 """The discount of a flat step when none is given (:class:`hrlp.config.AdvantageConfig`'s default)."""
@@ -351,6 +352,7 @@ class ParallelSampler:
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], policy: Policy, normalizer: RunningNormalizer,
                  seed: int = 0, workers: int = 2, gamma: float | None = None) -> None:  # fmt: skip
         import multiprocessing as mp
+        from multiprocessing import util as mp_util
 
         if workers < 2 or workers > len(env_fns):
             raise ValueError(f"ParallelSampler needs 2 <= workers <= environments ({len(env_fns)}), got {workers}")
@@ -359,22 +361,31 @@ class ParallelSampler:
         self.last_raw_obs: np.ndarray | None = None
         bounds = np.linspace(0, len(env_fns), workers + 1).astype(int)
         ctx = mp.get_context("spawn")  # no fork: torch and MuJoCo state must not be shared with children
-        self._conns = []
-        self._procs = []
-        for w in range(workers):
-            parent, child = ctx.Pipe()
-            chunk = list(env_fns[bounds[w] : bounds[w + 1]])
-            args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w, int(bounds[w]),
-                    os.getpid(), gamma)  # fmt: skip
-            proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
-            proc.start()
-            child.close()
-            self._conns.append(parent)
-            self._procs.append(proc)
-        for conn in self._conns:
-            _receive(conn)  # each worker reports ready (or the error that stopped it)
+        self._conns: list[Any] = []
+        self._procs: list[Any] = []
         self.num_envs = len(env_fns)
         self._pending = False
+        # Workers left running by a run that ends in an exception (a stop signal mid-start-up included) are killed when
+        # this object goes or the interpreter exits: they ignore SIGTERM, which multiprocessing's exit would send them
+        # before waiting for them (its finalizers with an exit priority run first).
+        self._finalizer = mp_util.Finalize(self, _kill_workers, args=(self._procs, self._conns), exitpriority=10)
+        try:
+            for w in range(workers):
+                parent, child = ctx.Pipe()
+                chunk = list(env_fns[bounds[w] : bounds[w + 1]])
+                args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w, int(bounds[w]),
+                        os.getpid(), gamma)  # fmt: skip
+                proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
+                with children_ignore_stop_signals():  # a Ctrl-C while the worker imports torch is this process's
+                    proc.start()
+                child.close()
+                self._conns.append(parent)
+                self._procs.append(proc)
+            for conn in self._conns:
+                _receive(conn)  # each worker reports ready (or the error that stopped it)
+        except BaseException:
+            self._finalizer()
+            raise
 
     def collect(self, steps_per_env: int) -> tuple[Batch, list[Episode]]:
         """Every worker samples ``steps_per_env`` steps of its environments at once; returns the joined batch."""
@@ -389,16 +400,16 @@ class ParallelSampler:
             raise RuntimeError("request() while a batch is still being sampled; receive() it first")
         weights = {k: v.detach().cpu().numpy() for k, v in self.policy.state_dict().items()}
         stats = {k: v.numpy() for k, v in self.normalizer.state_dict().items()}
+        self._pending = True  # from the first message on: close() then kills the workers instead of waiting for them
         for conn in self._conns:
             conn.send(("collect", (weights, stats, steps_per_env)))
-        self._pending = True
 
     def receive(self) -> tuple[Batch, list[Episode]]:
         """Wait for the batch started by :meth:`request`; returns it joined in environment order."""
         if not self._pending:
             raise RuntimeError("receive() without a request()")
-        self._pending = False
         parts = [_receive(conn) for conn in self._conns]
+        self._pending = False
         fields = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated", "discount")
         joined = {f: torch.cat([p["batch"][f] for p in parts], dim=1) for f in fields}
         raw = np.concatenate([p["raw"] for p in parts], axis=1)
@@ -427,7 +438,11 @@ class ParallelSampler:
             _receive(conn)
 
     def close(self) -> None:
-        """Stop the workers (closing their environments)."""
+        """Stop the workers: between batches they close their environments and end; in the middle of one (a run
+        stopped or failed while they sample, whose batch nobody will read) they are killed at once."""
+        if self._pending:
+            self._finalizer()
+            return
         for conn in self._conns:
             try:
                 conn.send(("close", None))
@@ -435,8 +450,18 @@ class ParallelSampler:
                 pass
         for proc in self._procs:
             proc.join(timeout=10)
-            if proc.is_alive():
-                proc.kill()
+        self._finalizer()  # any worker still alive
+
+
+def _kill_workers(procs: list[Any], conns: list[Any]) -> None:
+    """Kill every worker process still alive and wait for it (SIGKILL: workers ignore the stop signals)."""
+    for proc in procs:
+        if proc.is_alive():
+            proc.kill()
+    for proc in procs:
+        proc.join(timeout=10)
+    for conn in conns:
+        conn.close()
 
 
 def _receive(conn: Any) -> Any:
@@ -471,7 +496,9 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
                     first_index: int = 0, parent_pid: int | None = None, gamma: float | None = None) -> None:  # fmt: skip
     """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests.
 
-    It dies with its parent (:func:`die_with_parent`) and ends quietly when the parent's end of the pipe closes."""
+    It ignores the stop signals (the parent stops it: :mod:`hrlp.stopping`), dies with its parent
+    (:func:`die_with_parent`) and ends quietly when the parent's end of the pipe closes."""
+    ignore_stop_signals()
     if parent_pid is not None:
         die_with_parent(parent_pid)
     torch.set_num_threads(1)

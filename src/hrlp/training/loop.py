@@ -43,6 +43,7 @@ from hrlp.rollout import (
     mean_or_nan,
 )
 from hrlp.skills.macro_env import MacroEnv
+from hrlp.stopping import shielded
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
 from hrlp.training.loading import check_action_units, warm_start
 from hrlp.training.logs import RunLogger, progress_line, shown, truncate_log, update_stat
@@ -439,7 +440,7 @@ def train(
             # Rows past the checkpoint (all of them for a run killed before its first one) are written again.
             truncate_log(run_dir / "progress.csv", trainer.iteration)
             config_path = run_dir / "config.json"
-            with writing(config_path):
+            with shielded(), writing(config_path):  # a stop signal waits for the file to be whole
                 config_path.write_text(json.dumps(cfg.to_json(), indent=2))
             if on_start is not None:
                 on_start(plan_steps(cfg, trainer.env_steps))
@@ -449,13 +450,15 @@ def train(
                 stats = trainer.iterate()
                 # The log row first, then the checkpoint: a kill between the two leaves a row past the checkpoint,
                 # which a resume drops and writes again; the other order would leave the iteration out of the log.
-                logger.log(stats)
-                try:
-                    trainer.save(checkpoint)
-                except BaseException:  # a refused or failed save: the log goes back to the checkpoint it matches
-                    with contextlib.suppress(OSError):
-                        truncate_log(run_dir / "progress.csv", trainer.iteration - 1)
-                    raise
+                # A stop signal (hrlp.stopping) waits for both: the iteration is kept whole, or dropped before this.
+                with shielded():
+                    logger.log(stats)
+                    try:
+                        trainer.save(checkpoint)
+                    except BaseException:  # a refused or failed save: the log goes back to the checkpoint it matches
+                        with contextlib.suppress(OSError):
+                            truncate_log(run_dir / "progress.csv", trainer.iteration - 1)
+                        raise
                 streak = 0 if update_stat(stats, "accepted", 1.0) else streak + 1
                 if warn_after_rejected > 0 and streak == warn_after_rejected:
                     warn(rejected_steps_message(streak, cfg, trainer.iteration))
