@@ -26,11 +26,12 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from hrlp.envs.faults import EnvError
 from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorConstructor, VectorEnv, VectorStep
 from hrlp.envs.vector import action_decoder as action_decoder  # re-exported: its home is hrlp.envs.vector
 from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.skills.macro_env import MacroEnv, manager_vector_env
+from hrlp.skills.macro_env import MacroEnv, ManagerVectorEnv, manager_vector_env
 from hrlp.stopping import children_ignore_stop_signals, ignore_stop_signals
 
 DEFAULT_GAMMA = 0.99
@@ -171,14 +172,17 @@ class Sampler:
         self.policy = policy
         self.normalizer = normalizer
         self.generator = torch.Generator().manual_seed(seed)
-        self._obs = np.asarray(self.vector_env.reset(seed=seed), dtype=np.float64).copy()
+        self.first_index = first_index
         n = self.num_envs
         self._ret = np.zeros(n)
         self._len = np.zeros(n, dtype=np.int64)
+        try:
+            self._obs = np.asarray(self.vector_env.reset(seed=seed), dtype=np.float64).copy()
+        except EnvError as e:
+            raise self._located(e) from None
         self.timing = Timing()
         self.last_raw_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations of the last batch
         self._requested: int | None = None
-        self.first_index = first_index
 
     @property
     def num_envs(self) -> int:
@@ -227,7 +231,10 @@ class Sampler:
                 actions_buf = np.empty((steps_per_env, *actions.shape))
             actions_buf[t] = actions
             t1 = time.perf_counter()
-            step = self.vector_env.step(rows)
+            try:
+                step = self.vector_env.step(rows)
+            except EnvError as e:  # the user's environment failed: name it by its run-wide index and its episode step
+                raise self._located(e) from None
             t2 = time.perf_counter()
             episode_steps = self._len + step.tau  # per environment, the step of its episode taken last
             rewards[t], discount[t] = step.rewards, step.discount
@@ -314,6 +321,15 @@ class Sampler:
             raise NonFiniteError(f"non-finite {field} ({shown}) from environment {self.first_index + i} {when}; "
                                  "stopped before it entered the normaliser, the networks or a checkpoint")  # fmt: skip
         raise AssertionError("_non_finite called with finite values")  # pragma: no cover
+
+    def _located(self, error: EnvError) -> EnvError:
+        """``error`` (raised by environment ``i`` of this sampler's vector environment) with the environment's index
+        among all the run's and, for a step, the step of its episode that failed."""
+        fault = error.fault
+        i = fault.index
+        step = None if fault.call == "reset" or not 0 <= i < self.num_envs else int(self._len[i]) + 1
+        return EnvError(dataclasses.replace(fault, index=self.first_index + i, episode_step=step,
+                                            decision=isinstance(self.vector_env, ManagerVectorEnv)))  # fmt: skip
 
     def _finish(self, i: int, step: VectorStep) -> Episode:
         """Environment ``i``'s episode, ended at ``step``; its running return and length start again."""
@@ -472,6 +488,8 @@ def _receive(conn: Any) -> Any:
         raise RuntimeError("a sampler worker process died") from None
     if kind == "non-finite":
         raise NonFiniteError(payload)
+    if kind == "env-error":  # the user's environment failed in the worker: the fault, as the worker's sampler named it
+        raise EnvError(payload)
     if kind == "error":
         raise RuntimeError(f"sampler worker failed: {payload}")
     return payload
@@ -507,6 +525,9 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
         sampler = Sampler(env_fns, policy, normalizer, seed=env_seed, first_index=first_index, gamma=gamma)
         sampler.generator.manual_seed(noise_seed)
         conn.send(("ok", None))
+    except EnvError as e:  # the first reset of a user's environment failed
+        conn.send(("env-error", e.fault))
+        return
     except Exception as e:  # reported to the parent, which raises it
         conn.send(("error", f"{type(e).__name__}: {e}"))
         return
@@ -545,6 +566,8 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
             conn.send(("ok", reply))
         except NonFiniteError as e:  # the parent raises it as it is (it names the environment by its global index)
             conn.send(("non-finite", str(e)))
+        except EnvError as e:  # likewise: the fault record, sent as it is
+            conn.send(("env-error", e.fault))
         except Exception as e:  # reported to the parent, which raises it
             conn.send(("error", f"{type(e).__name__}: {e}"))
 

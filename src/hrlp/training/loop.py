@@ -32,6 +32,7 @@ from hrlp.checkpoint import (
     unpack_generators,
 )
 from hrlp.config import TrainConfig
+from hrlp.envs.faults import EnvError
 from hrlp.policies.mlp import GaussianPolicy, ValueNet, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import (
@@ -419,11 +420,11 @@ def train(
         if resume:
             if not checkpoint_exists(checkpoint):
                 raise ValueError(f"--resume: {run_dir} has no checkpoint to continue from")
-            trainer = Trainer.resume(checkpoint)
+            trainer = _reporting_env_faults(lambda: Trainer.resume(checkpoint), resume)
         else:
             if checkpoint_exists(checkpoint):
                 raise ValueError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
-            trainer = Trainer(cfg)
+            trainer = _reporting_env_faults(lambda: Trainer(cfg), resume)
             cfg = trainer.cfg  # with the number of workers it uses: config.json and the checkpoint record it
         logger: RunLogger | None = None
         try:  # from here on, whatever fails, the sampler (and its worker processes) is closed
@@ -447,7 +448,10 @@ def train(
             logger = RunLogger(run_dir)
             streak = 0
             while not budget_spent(cfg, trainer.env_steps, trainer.episodes_done):
-                stats = trainer.iterate()
+                try:
+                    stats = trainer.iterate()
+                except EnvError as e:  # the user's environment failed: which iteration, and where the run stands
+                    raise e.adding(iteration=trainer.iteration + 1, run_state=run_state(trainer)) from None
                 # The log row first, then the checkpoint: a kill between the two leaves a row past the checkpoint,
                 # which a resume drops and writes again; the other order would leave the iteration out of the log.
                 # A stop signal (hrlp.stopping) waits for both: the iteration is kept whole, or dropped before this.
@@ -467,6 +471,25 @@ def train(
             if logger is not None:
                 logger.close()
             trainer.sampler.close()
+
+
+def run_state(trainer: Trainer | None, resumed: bool = False) -> str:
+    """Where a run that ends in an error stands on disk: its last checkpoint (every iteration is saved as it ends), or
+    that nothing was saved."""
+    if trainer is None:
+        return "the run's checkpoint is as it was; --resume continues it" if resumed else "nothing was saved"
+    if trainer.iteration == 0:
+        return "nothing was saved (the first iteration had not ended)"
+    return (f"the run's last checkpoint (iteration {trainer.iteration}, {trainer.env_steps:,} steps) is intact; --resume "
+            "continues it")  # fmt: skip
+
+
+def _reporting_env_faults(build: Callable[[], Trainer], resumed: bool) -> Trainer:
+    """``build()``; a fault of the user's environment while it starts (its first reset) says where the run stands."""
+    try:
+        return build()
+    except EnvError as e:
+        raise e.adding(run_state=run_state(None, resumed)) from None
 
 
 @dataclass
