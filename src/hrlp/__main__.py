@@ -6,7 +6,7 @@ Ctrl-C while they import (torch takes seconds) ends in one line, not a traceback
 
 import sys
 
-from hrlp.stopping import Stopped, exit_at_once_on_stop_signals, install_stop_handlers
+from hrlp.stopping import as_stop, exit_at_once_on_stop_signals, install_stop_handlers
 
 
 def main() -> None:
@@ -16,9 +16,11 @@ def main() -> None:
         from hrlp.cli import main as cli_main
 
         cli_main()
-    except Stopped as e:  # before the command started (its own stops are reported by hrlp.cli)
-        print(e.line("during start-up; nothing was written"), file=sys.stderr, flush=True)
-        raise SystemExit(e.exit_code) from None
+    except BaseException as error:  # a stop before the command started (its own stops are reported by hrlp.cli)
+        if (stop := as_stop(error)) is None:
+            raise
+        print(stop.line("during start-up; nothing was written"), file=sys.stderr, flush=True)
+        raise SystemExit(stop.exit_code) from None
     finally:
         exit_at_once_on_stop_signals()
 

@@ -30,7 +30,7 @@ from hrlp.config import (
     auto_workers,
     field_docs,
 )
-from hrlp.stopping import Stopped, describing
+from hrlp.stopping import Stopped, as_stop, describing, raise_if_stopping
 
 console = Console()
 err_console = Console(stderr=True, soft_wrap=True)  # one-line errors, never wrapped
@@ -80,6 +80,13 @@ def _known_error_line(error: BaseException) -> str | None:
     return None
 
 
+def _stopped_exit(stop: Stopped) -> int:
+    """Print a stop's one line on stderr; its exit code (128 + the signal)."""
+    default = "" if _COMMAND_STARTED else "during start-up; nothing was written"
+    err_console.print(escape(" ".join(stop.line(default).split())), highlight=False)
+    return stop.exit_code
+
+
 class _OneLineErrors(TyperGroup):
     """The ``hrlp`` group: every error a user can cause ends the command with one line ``error: ...`` on stderr and
     exit code 2, never a traceback. Parse errors (click's usage errors, :class:`hrlp.cli_params.BoundError`) and the
@@ -94,6 +101,7 @@ class _OneLineErrors(TyperGroup):
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
             code = rv if isinstance(rv, int) else 0  # typer.Exit(code) comes back as its code here
+            raise_if_stopping()  # a stop signal whose exception went astray (hrlp.stopping) still ends in its line
         except click_errors.NoArgsIsHelpError as e:  # the help was printed
             code = e.exit_code
         except click_errors.UsageError as e:
@@ -107,13 +115,14 @@ class _OneLineErrors(TyperGroup):
         except typer.Abort:
             code = _error_exit("aborted", 1)
         except Stopped as e:  # SIGINT, SIGTERM or SIGHUP (hrlp.stopping): one line, and 128 + the signal
-            default = "" if _COMMAND_STARTED else "during start-up; nothing was written"
-            err_console.print(escape(" ".join(e.line(default).split())), highlight=False)
-            code = e.exit_code
+            code = _stopped_exit(e)
         except Exception as e:
-            if (line := _known_error_line(e)) is None:
+            if (stop := as_stop(e)) is not None:  # an error the stop caused (it came while the stop unwound the command)
+                code = _stopped_exit(stop)
+            elif (line := _known_error_line(e)) is None:
                 raise
-            code = _error_exit(line)
+            else:
+                code = _error_exit(line)
         if not standalone_mode:
             return code
         raise SystemExit(code)
@@ -144,12 +153,22 @@ def _hrlp(
     ] = False,
 ) -> None:
     """Hierarchical Reinforcement Learning with Parameters: tasks, skills, Managers and the paper's experiments."""
-    global _COMMAND_STARTED
-    _COMMAND_STARTED = True
 
 
 _COMMAND_STARTED = False
-"""Whether a command has begun (its options parsed): a stop signal before that has written nothing."""
+"""Whether a command's body has begun (its options parsed and checked): a stop signal before that has written nothing."""
+
+
+def _marking_start(command: Callable[..., Any]) -> Callable[..., Any]:
+    """``command`` that first records that a command's body has begun (:data:`_COMMAND_STARTED`)."""
+
+    @functools.wraps(command)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        global _COMMAND_STARTED
+        _COMMAND_STARTED = True
+        return command(*args, **kwargs)
+
+    return run
 
 
 def _given(ctx: typer.Context, name: str) -> bool:
@@ -1497,6 +1516,11 @@ def runs_command(
     for row in rows:  # plain aligned columns, never cut to the terminal's width (a file or a pipe gets them whole)
         print("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=False)) + "  " + row[-1])
     print(f"{len(found)} run{'s' if len(found) != 1 else ''} under {root}")
+
+
+for _commands in (app, skills_app):  # every command records when its body begins (a stop's line says what was written)
+    for _info in _commands.registered_commands:
+        _info.callback = _marking_start(_info.callback)  # type: ignore[arg-type]
 
 
 def main() -> None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import pickle
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -388,15 +389,18 @@ class ParallelSampler:
         try:
             for w in range(workers):
                 parent, child = ctx.Pipe()
+                self._conns.append(parent)
                 chunk = list(env_fns[bounds[w] : bounds[w + 1]])
-                args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w, int(bounds[w]),
-                        os.getpid(), gamma)  # fmt: skip
+                # The policy goes as bytes and batches come back as arrays: torch's own pickling would share their
+                # memory through a server thread of the sender, which prints a traceback when the other side is killed
+                # mid-handshake (as a stop kills the workers).
+                args = (child, chunk, pickle.dumps(policy), normalizer.config(), seed + int(bounds[w]), seed + 7919 * w,
+                        int(bounds[w]), os.getpid(), gamma)  # fmt: skip
                 proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
+                self._procs.append(proc)  # before it starts: a stop as it starts (acted on right after) must find it
                 with children_ignore_stop_signals():  # a Ctrl-C while the worker imports torch is this process's
                     proc.start()
                 child.close()
-                self._conns.append(parent)
-                self._procs.append(proc)
             for conn in self._conns:
                 _receive(conn)  # each worker reports ready (or the error that stopped it)
         except BaseException:
@@ -427,7 +431,7 @@ class ParallelSampler:
         parts = [_receive(conn) for conn in self._conns]
         self._pending = False
         fields = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated", "discount")
-        joined = {f: torch.cat([p["batch"][f] for p in parts], dim=1) for f in fields}
+        joined = {f: torch.cat([torch.from_numpy(p["batch"][f]) for p in parts], dim=1) for f in fields}
         raw = np.concatenate([p["raw"] for p in parts], axis=1)
         self.last_raw_obs = raw
         if not self.normalizer.frozen:
@@ -471,10 +475,11 @@ class ParallelSampler:
 
 def _kill_workers(procs: list[Any], conns: list[Any]) -> None:
     """Kill every worker process still alive and wait for it (SIGKILL: workers ignore the stop signals)."""
-    for proc in procs:
+    started = [proc for proc in procs if proc.pid is not None]
+    for proc in started:
         if proc.is_alive():
             proc.kill()
-    for proc in procs:
+    for proc in started:
         proc.join(timeout=10)
     for conn in conns:
         conn.close()
@@ -510,7 +515,7 @@ def die_with_parent(parent_pid: int) -> None:
         os._exit(0)
 
 
-def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict, env_seed: int, noise_seed: int,
+def _sampler_worker(conn: Any, env_fns: list, policy_bytes: bytes, norm_config: dict, env_seed: int, noise_seed: int,
                     first_index: int = 0, parent_pid: int | None = None, gamma: float | None = None) -> None:  # fmt: skip
     """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests.
 
@@ -521,6 +526,7 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
         die_with_parent(parent_pid)
     torch.set_num_threads(1)
     try:
+        policy: Policy = pickle.loads(policy_bytes)
         normalizer = RunningNormalizer.from_config({**norm_config, "frozen": True})
         sampler = Sampler(env_fns, policy, normalizer, seed=env_seed, first_index=first_index, gamma=gamma)
         sampler.generator.manual_seed(noise_seed)
@@ -547,8 +553,9 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
                 normalizer.load_state_dict(stats)
                 env0, inf0, phys0 = sampler.timing.env, sampler.timing.inference, sampler.timing.physics
                 batch, episodes = sampler.collect(steps)
+                fields = {f.name: getattr(batch, f.name) for f in dataclasses.fields(batch)}
                 reply = {
-                    "batch": {f.name: getattr(batch, f.name) for f in dataclasses.fields(batch)},
+                    "batch": {k: v.numpy() if isinstance(v, torch.Tensor) else v for k, v in fields.items()},
                     "episodes": episodes,
                     "raw": sampler.last_raw_obs,
                     "env": sampler.timing.env - env0,

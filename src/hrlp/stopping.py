@@ -8,13 +8,15 @@
   with ``128 + signal`` (130, 143, 129). :func:`handling_stop_signals` does the same for a block and puts the previous
   handlers back after it (for tests and for programs that call hrlp's commands in-process).
 * :func:`shielded` -- a block that a signal does not cut in two (a checkpoint save with its log row): the signal is
-  acted on as the block ends.
+  acted on as the block ends. A signal that comes while a module is being imported waits for the import to end too
+  (an exception raised inside the import of a compiled module can abort the interpreter, as torch's does): it is acted
+  on within :data:`_RETRY_S` seconds of the import's end.
 * A second signal while the first is being acted on ends the process at once (``os._exit``) with one line; what is on
   disk is what a kill at that moment leaves, and checkpoints are written so that any kill leaves a whole one
   (:mod:`hrlp.checkpoint`).
-* Worker processes do not act on these signals (a Ctrl-C in a terminal reaches the whole process group): they call
-  :func:`ignore_stop_signals` first, and are started inside :func:`children_ignore_stop_signals`, so that even a
-  worker still importing torch ignores them; the main process stops them.
+* Worker processes do not act on these signals (a Ctrl-C in a terminal reaches the whole process group): they are
+  started inside :func:`children_ignore_stop_signals`, so that they begin with the signals held back (a worker still
+  importing torch does nothing), and call :func:`ignore_stop_signals` first; the main process stops them.
 
 Only the standard library is imported here: the ``hrlp`` command installs the handlers before anything else.
 """
@@ -93,7 +95,47 @@ def _on_signal(signum: int, frame: FrameType | None) -> None:
     if _State.shield:
         _State.deferred = signum
         return
+    if _importing(frame):  # an exception inside a compiled module's import can abort the interpreter (torch's does)
+        _State.deferred = signum
+        _retry_soon()
+        return
     raise Stopped(signum)
+
+
+def _importing(frame: FrameType | None) -> bool:
+    """Whether ``frame`` runs inside an ``import`` (importlib's frames are on the stack)."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
+
+
+_RETRY_S = 0.05
+"""How often a stop deferred by an import looks again whether the import has ended."""
+
+
+def _retry_soon() -> None:
+    """Act on the deferred stop as soon as the import has ended: SIGALRM, every :data:`_RETRY_S` seconds, until then."""
+    signal.signal(signal.SIGALRM, _on_alarm)
+    signal.setitimer(signal.ITIMER_REAL, _RETRY_S)
+
+
+def _on_alarm(signum: int, frame: FrameType | None) -> None:
+    if _State.deferred is None:  # acted on already (a shielded block ended, or a safe point's check)
+        return
+    if _State.shield or _importing(frame):
+        signal.setitimer(signal.ITIMER_REAL, _RETRY_S)
+        return
+    deferred, _State.deferred = _State.deferred, None
+    raise Stopped(deferred)
+
+
+def _disarm() -> None:
+    """Cancel a pending retry (Python restores SIGALRM's default, which ends the process, as it exits)."""
+    if _State.deferred is not None or signal.getsignal(signal.SIGALRM) is _on_alarm:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+    _State.deferred = None
 
 
 def _exit_now(signum: int) -> None:
@@ -118,18 +160,28 @@ def _main_thread() -> bool:
 
 def install_stop_handlers() -> None:
     """Make :data:`STOP_SIGNALS` raise :class:`Stopped` for the rest of the process's life (the ``hrlp`` command's
-    entry point). Outside the main thread: nothing (Python delivers signals to the main thread only)."""
+    entry point); a signal the process ignores already (SIGHUP under ``nohup``) stays ignored. Outside the main thread:
+    nothing (Python runs signal handlers in the main thread only)."""
     if not _main_thread():
         return
-    for s in STOP_SIGNALS:
-        signal.signal(s, _on_signal)
+    _install()
     _State.installed += 1
+
+
+def _install() -> None:
+    """Our handler for each stop signal, except one this process was told to ignore (``nohup`` ignores SIGHUP: a
+    closed terminal must then not stop the run)."""
+    for s in STOP_SIGNALS:
+        if signal.getsignal(s) is not signal.SIG_IGN:
+            signal.signal(s, _on_signal)
 
 
 def exit_at_once_on_stop_signals() -> None:
     """From now on a stop signal ends the process at once (a command that has finished and only exits: its
     interpreter shutdown, with its ``atexit`` handlers, is no place for an exception)."""
     _State.stopping = -1 if _State.stopping is None else _State.stopping
+    if _main_thread():
+        _disarm()
 
 
 @contextlib.contextmanager
@@ -140,17 +192,42 @@ def handling_stop_signals() -> Iterator[None]:
         yield
         return
     previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
-    for s in STOP_SIGNALS:
-        signal.signal(s, _on_signal)
+    _install()
     _State.installed += 1
     try:
         yield
     finally:
         _State.installed -= 1
         if _State.installed == 0:
-            _State.stopping = _State.deferred = None
+            _disarm()
+            _State.stopping = None
         for s, handler in previous.items():
             signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+
+
+def stop_signal() -> int | None:
+    """The stop signal being acted on (one has arrived and the process is stopping), or None."""
+    return None if _State.stopping in (None, -1) else _State.stopping
+
+
+def raise_if_stopping() -> None:
+    """Raise :class:`Stopped` if a stop signal has arrived but its exception went astray: swallowed by code that
+    catches everything, or turned by a compiled module's interrupted import into an error that someone caught. Called
+    at safe points (before each training iteration, as a :func:`describing` block ends); a no-op inside a
+    :func:`shielded` block, which raises it as it ends."""
+    if (signum := stop_signal()) is not None and not _State.shield:
+        _disarm()
+        raise Stopped(signum)
+
+
+def as_stop(error: BaseException) -> Stopped | None:
+    """``error`` as a :class:`Stopped`: itself if it is one, a new one if a stop signal has arrived (an error raised
+    while the stop unwinds, or one that C code made of it: an interrupted ``import`` of a compiled module raises
+    ``ImportError: initialization failed``), else None."""
+    if isinstance(error, Stopped):
+        return error
+    signum = stop_signal()
+    return None if signum is None or isinstance(error, SystemExit) else Stopped(signum)
 
 
 def handling() -> bool:
@@ -170,7 +247,8 @@ def shielded() -> Iterator[None]:
     finally:
         _State.shield -= 1
     if _State.shield == 0 and _State.deferred is not None:
-        signum, _State.deferred = _State.deferred, None
+        signum = _State.deferred
+        _disarm()
         raise Stopped(signum)
 
 
@@ -182,6 +260,13 @@ def describing(detail: Callable[[], str]) -> Iterator[None]:
     _State.describe.append(detail)
     try:
         yield
+        raise_if_stopping()
+    except Exception as error:
+        if (stop := as_stop(error)) is None:
+            raise
+        with contextlib.suppress(Exception):
+            stop.detail = detail()
+        raise stop from None
     except Stopped as e:
         if not e.detail:
             with contextlib.suppress(Exception):
@@ -192,8 +277,9 @@ def describing(detail: Callable[[], str]) -> Iterator[None]:
 
 
 def ignore_stop_signals() -> None:
-    """In a worker process: ignore :data:`STOP_SIGNALS` (the main process stops the worker) and stop holding them back
-    (a process started inside :func:`children_ignore_stop_signals` begins with them held back and ignored)."""
+    """In a worker process: ignore :data:`STOP_SIGNALS` (the main process stops the worker), then stop holding them back
+    (a process started inside :func:`children_ignore_stop_signals` begins with them held back; those pending are
+    dropped)."""
     for s in STOP_SIGNALS:
         signal.signal(s, signal.SIG_IGN)
     if hasattr(signal, "pthread_sigmask"):
@@ -203,29 +289,42 @@ def ignore_stop_signals() -> None:
 @contextlib.contextmanager
 def children_ignore_stop_signals() -> Iterator[None]:
     """Processes started inside the block (fork and exec, as multiprocessing's ``spawn`` does) begin with
-    :data:`STOP_SIGNALS` ignored, so a Ctrl-C to the process group while one starts up (it imports torch for seconds)
-    prints nothing there. Signal dispositions set to "ignore" survive ``exec``, handlers do not; so for the block this
-    process holds the signals back (they stay pending, and are acted on as the block ends) and ignores them."""
+    :data:`STOP_SIGNALS` held back (blocked), so a Ctrl-C to the process group while one starts up (it imports torch
+    for seconds) does nothing there; the worker then ignores them and lets them through (:func:`ignore_stop_signals`).
+
+    A blocked set survives ``exec`` (a handler does not, and "ignore" set here would be this process's too, where
+    another thread could take a signal and drop it). This thread blocks them for the block; a signal meanwhile stays
+    pending, or reaches another thread, whose handler defers it (the block is :func:`shielded`): either way it is
+    acted on as the block ends."""
     if not _main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
-    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
-    for s, handler in previous.items():
-        if handler is not None:  # None: a handler set outside Python, which cannot be put back
-            signal.signal(s, signal.SIG_IGN)
+    with shielded():
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+        try:
+            _start_resource_tracker()
+            signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker now, with the stop signals blocked (it ignores SIGINT and SIGTERM
+    itself; SIGHUP stays blocked there, so a closed terminal does not end it either). Left to the first ``spawn``, it
+    would start inside :func:`children_ignore_stop_signals` and unblock SIGINT and SIGTERM in this thread as it does,
+    so that the worker spawned next would begin with them unblocked."""
     try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            if handler is not None:
-                signal.signal(s, handler)
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        from multiprocessing import resource_tracker
+    except ImportError:  # pragma: no cover - a platform without it
+        return
+    resource_tracker.ensure_running()
 
 
 __all__ = [
     "STOP_SIGNALS",
     "Stopped",
+    "as_stop",
     "children_ignore_stop_signals",
     "describing",
     "exit_at_once_on_stop_signals",
@@ -233,6 +332,8 @@ __all__ = [
     "handling_stop_signals",
     "ignore_stop_signals",
     "install_stop_handlers",
+    "raise_if_stopping",
     "shielded",
     "signal_name",
+    "stop_signal",
 ]

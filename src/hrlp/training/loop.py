@@ -44,7 +44,7 @@ from hrlp.rollout import (
     mean_or_nan,
 )
 from hrlp.skills.macro_env import MacroEnv
-from hrlp.stopping import shielded
+from hrlp.stopping import raise_if_stopping, shielded
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
 from hrlp.training.loading import check_action_units, warm_start
 from hrlp.training.logs import RunLogger, progress_line, shown, truncate_log, update_stat
@@ -448,6 +448,7 @@ def train(
             logger = RunLogger(run_dir)
             streak = 0
             while not budget_spent(cfg, trainer.env_steps, trainer.episodes_done):
+                raise_if_stopping()  # a stop signal whose exception went astray (hrlp.stopping) is acted on here
                 try:
                     stats = trainer.iterate()
                 except EnvError as e:  # the user's environment failed: which iteration, and where the run stands
