@@ -89,9 +89,10 @@ def test_gripper_variants_retrains_the_shipped_gripper_and_reports_both_start_se
 
 
 def test_gripper_handover_collects_four_banks_and_evaluates_every_start_set(tmp_path):
-    manager = subprocess.run(["hrlp", "train-manager", "ReachAndGrip2", "--skills", "gripper-imitated,reacher-handover",
-                              "--steps", "200", "--batch-steps", "20", "--num-envs", "2", "--workers", "1", "--run-dir",
-                              str(tmp_path / "m")], capture_output=True, text=True, timeout=300)  # fmt: skip
+    manager = subprocess.run([sys.executable, "-m", "hrlp", "train-manager", "ReachAndGrip2", "--skills",
+                              "gripper-imitated,reacher-handover", "--steps", "200", "--batch-steps", "20", "--num-envs",
+                              "2", "--workers", "1", "--run-dir", str(tmp_path / "m")], capture_output=True, text=True,
+                             timeout=300)  # fmt: skip
     assert manager.returncode == 0, manager.stderr[-2000:]
     args = f"{tmp_path / 'm'} --states 2 --episodes 1 --steps 20 --out {tmp_path / 'gh'}"
     out = _run("gripper_handover.py", args, tmp_path)

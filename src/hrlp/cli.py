@@ -13,6 +13,7 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 from typer.core import TyperGroup
 
@@ -31,6 +32,7 @@ from hrlp.config import (
     auto_workers,
     field_docs,
 )
+from hrlp.stopping import Stopped, as_stop, describing, raise_if_stopping
 
 console = Console()
 err_console = Console(stderr=True, soft_wrap=True)  # one-line errors, never wrapped
@@ -43,8 +45,6 @@ def _fail(message: str) -> typer.Exit:
 
 def _error_exit(message: str, code: int = 2) -> int:
     """Print ``message`` as one line (``error: ...``, whitespace collapsed, never read as markup) on stderr."""
-    from rich.markup import escape
-
     err_console.print(f"[bold red]error:[/] {escape(' '.join(message.split()))}", highlight=False)
     return code
 
@@ -82,10 +82,19 @@ def _known_error_line(error: BaseException) -> str | None:
     return None
 
 
+def _stopped_exit(stop: Stopped) -> int:
+    """Print a stop's one line on stderr; its exit code (128 + the signal)."""
+    default = "" if _COMMAND_STARTED else "during start-up; nothing was written"
+    err_console.print(escape(" ".join(stop.line(default).split())), highlight=False)
+    return stop.exit_code
+
+
 class _OneLineErrors(TyperGroup):
     """The ``hrlp`` group: every error a user can cause ends the command with one line ``error: ...`` on stderr and
     exit code 2, never a traceback. Parse errors (click's usage errors, :class:`hrlp.cli_params.BoundError`) and the
-    known error types of :func:`_known_error_line` raised by any command are turned into that line here, once."""
+    known error types of :func:`_known_error_line` raised by any command are turned into that line here, once. A stop
+    signal (:class:`hrlp.stopping.Stopped`) ends it with the one line :meth:`~hrlp.stopping.Stopped.line` and exit code
+    128 + the signal."""
 
     def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
              standalone_mode: bool = True, **extra: Any) -> Any:  # fmt: skip
@@ -94,6 +103,7 @@ class _OneLineErrors(TyperGroup):
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
             code = rv if isinstance(rv, int) else 0  # typer.Exit(code) comes back as its code here
+            raise_if_stopping()  # a stop signal whose exception went astray (hrlp.stopping) still ends in its line
         except click_errors.NoArgsIsHelpError as e:  # the help was printed
             code = e.exit_code
         except click_errors.UsageError as e:
@@ -106,10 +116,15 @@ class _OneLineErrors(TyperGroup):
             code = _error_exit(message, e.exit_code)
         except typer.Abort:
             code = _error_exit("aborted", 1)
+        except Stopped as e:  # SIGINT, SIGTERM or SIGHUP (hrlp.stopping): one line, and 128 + the signal
+            code = _stopped_exit(e)
         except Exception as e:
-            if (line := _known_error_line(e)) is None:
+            if (stop := as_stop(e)) is not None:  # an error the stop caused (it came while the stop unwound the command)
+                code = _stopped_exit(stop)
+            elif (line := _known_error_line(e)) is None:
                 raise
-            code = _error_exit(line)
+            else:
+                code = _error_exit(line)
         if not standalone_mode:
             return code
         raise SystemExit(code)
@@ -140,6 +155,22 @@ def _hrlp(
     ] = False,
 ) -> None:
     """Hierarchical Reinforcement Learning with Parameters: tasks, skills, Managers and the paper's experiments."""
+
+
+_COMMAND_STARTED = False
+"""Whether a command's body has begun (its options parsed and checked): a stop signal before that has written nothing."""
+
+
+def _marking_start(command: Callable[..., Any]) -> Callable[..., Any]:
+    """``command`` that first records that a command's body has begun (:data:`_COMMAND_STARTED`)."""
+
+    @functools.wraps(command)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        global _COMMAND_STARTED
+        _COMMAND_STARTED = True
+        return command(*args, **kwargs)
+
+    return run
 
 
 def _given(ctx: typer.Context, name: str) -> bool:
@@ -236,7 +267,8 @@ def demo(
     check_rendering(480, 360)  # the video comes after minutes of training: a missing OpenGL driver fails now
     from hrlp.experiments.demo import run_demo
 
-    res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers)
+    with describing(lambda: f"; the same command continues the run in {out_dir} from its last checkpoint"):
+        res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers)
     console.print(f"success rate: {res.success}")
     console.print(f"video: {res.video}\nlearning curve: {res.plot}\nrun: {res.run_dir} (hrlp eval / hrlp render work on it)")
 
@@ -306,8 +338,10 @@ def reproduce(
         )
         err_console.print(f"{r['preset']} / {r['run']} / seed {r['seed']}: {what}, {r['env_steps']:,} steps{note}")
 
-    results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse,
-                       only=tuple(only or ()))  # fmt: skip
+    stopped = "; finished runs are kept, and the same command continues the others from their last checkpoints"
+    with describing(lambda: stopped):
+        results = run_grid(preset, out, seeds, budget, backend, workers, address, on_result=report, reuse=reuse,
+                           only=tuple(only or ()))  # fmt: skip
     console.print(f"{len(results)} runs of {preset} in {out / preset}; tables: hrlp tables --root {out}")
 
 
@@ -598,8 +632,64 @@ def _apply_paper_settings(ctx: typer.Context) -> set[str]:
     return left_out
 
 
+def _stops_as_a_run(command: Callable[..., None]) -> Callable[..., None]:
+    """A training command whose stop by a signal names the run's last saved iteration and the command that continues
+    it (:func:`_run_stop_detail`)."""
+
+    @functools.wraps(command)
+    def run(**kwargs: Any) -> None:
+        ctx = kwargs["ctx"]
+        with describing(lambda: _run_stop_detail(ctx)):
+            command(**kwargs)
+
+    return run
+
+
+def _run_stop_detail(ctx: typer.Context) -> str:
+    """Where a training run stopped by a signal stands on disk, and what continues it: ``at iteration 41 (2,050,000
+    steps); hrlp train Reacher --run-dir runs/x --resume continues it``."""
+    import shlex
+
+    p = ctx.params
+    out = _run_dir(p)
+    saved = _saved_progress(out / "checkpoint")
+    if saved is None:
+        return "before its first iteration was saved: there is nothing to resume, and the same command starts the run again"
+    iteration, steps = saved
+    budgets = "".join(f" --{n} {p[n]}" for n in ("steps", "episodes") if p.get("resume") and _given(ctx, n))
+    return (f"at iteration {iteration} ({steps:,} steps); hrlp {ctx.info_name} {shlex.quote(p['task'])} --run-dir "
+            f"{shlex.quote(str(out))} --resume{budgets} continues it")  # fmt: skip
+
+
+def _run_dir(p: dict[str, Any]) -> Path:
+    """The run directory of a training command's options ``p`` (``--run-dir``, or ``runs/TASK-sSEED``)."""
+    return p.get("run_dir") or Path("runs") / f"{p['task'].replace('/', '_').replace(':', '_')}-s{p['seed']}"
+
+
+def _saved_progress(checkpoint: Path) -> tuple[int, int] | None:
+    """``(iteration, env_steps)`` of the training checkpoint at ``checkpoint`` (or of the whole ``.old`` copy a kill
+    between a save's renames leaves), None if there is none or it cannot be read. Reads only ``meta.json``."""
+    import json
+    import sys
+
+    path = checkpoint / "meta.json"
+    if not path.is_file() and "hrlp.checkpoint" in sys.modules:  # (no torch import here, at a stop during start-up)
+        from hrlp.checkpoint import CheckpointError, resolve_checkpoint
+
+        try:
+            path = resolve_checkpoint(checkpoint) / "meta.json"
+        except CheckpointError:
+            return None
+    try:
+        meta = json.loads(path.read_text())["meta"]
+        return int(meta["iteration"]), int(meta["env_steps"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 @app.command()
 @_settings_options()
+@_stops_as_a_run
 def train(
     ctx: typer.Context,
     task: Annotated[
@@ -630,6 +720,7 @@ def train(
 
 @app.command("train-manager")
 @_settings_options(batch_steps=5_000)  # the paper's Manager batch (TrainConfig's default is the flat runs' 50,000)
+@_stops_as_a_run
 def train_manager(
     ctx: typer.Context,
     task: Annotated[
@@ -804,7 +895,7 @@ def _train(ctx: typer.Context, macro: Any, run_dir: Path | None, resume: bool, t
 
     p = ctx.params
     task = p["task"]
-    out = run_dir or Path("runs") / f"{task.replace('/', '_').replace(':', '_')}-s{p['seed']}"
+    out = _run_dir(p)
     manager_command = macro is not None or ctx.info_name == "train-manager"
     try:
         if resume:
@@ -1231,8 +1322,9 @@ def eval_(
     from hrlp.evaluate import evaluate_with_progress
 
     try:  # errors end as one line from the top-level handler (_OneLineErrors)
-        ev = evaluate_with_progress(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic,
-                                    console=err_console, description=f"eval {run_dir}")  # fmt: skip
+        with describing(lambda: "during the evaluation; nothing was written"):
+            ev = evaluate_with_progress(run_dir, episodes=episodes, seed=seed, deterministic=not stochastic,
+                                        console=err_console, description=f"eval {run_dir}")  # fmt: skip
     except StorageError:
         raise
     except OSError as e:
@@ -1526,6 +1618,11 @@ def runs_command(
     for row in rows:  # plain aligned columns, never cut to the terminal's width (a file or a pipe gets them whole)
         print("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=False)) + "  " + row[-1])
     print(f"{len(found)} run{'s' if len(found) != 1 else ''} under {root}")
+
+
+for _commands in (app, skills_app):  # every command records when its body begins (a stop's line says what was written)
+    for _info in _commands.registered_commands:
+        _info.callback = _marking_start(_info.callback)  # type: ignore[arg-type]
 
 
 def main() -> None:

@@ -28,7 +28,17 @@ def read_progress(run_dir: Path) -> dict[str, np.ndarray]:
         rows = list(csv.DictReader(f))
     if not rows:
         raise ValueError(f"{path}: no iterations logged yet")
-    return {k: np.array([float(r[k]) if r[k] not in ("", None) else math.nan for r in rows]) for k in rows[0]}
+
+    def number(line: int, row: dict[str, str | None], key: str) -> float:
+        value = row.get(key)
+        if value in ("", None):
+            return math.nan
+        try:
+            return float(value)  # type: ignore[arg-type]
+        except ValueError:
+            raise ValueError(f"{path}, line {line}: {key} is {str(value)[:40]!r}, not a number; the log is damaged") from None
+
+    return {k: np.array([number(n, r, k) for n, r in enumerate(rows, start=2)]) for k in rows[0]}
 
 
 def plot_learning_curves(

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import pickle
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -26,11 +27,13 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from hrlp.envs.faults import EnvError
 from hrlp.envs.vector import NO_SUCCESS_TEST, SerialVectorEnv, VectorConstructor, VectorEnv, VectorStep
 from hrlp.envs.vector import action_decoder as action_decoder  # re-exported: its home is hrlp.envs.vector
 from hrlp.policies.mlp import Policy
 from hrlp.policies.normalizer import RunningNormalizer
-from hrlp.skills.macro_env import MacroEnv, manager_vector_env
+from hrlp.skills.macro_env import MacroEnv, ManagerVectorEnv, manager_vector_env
+from hrlp.stopping import children_ignore_stop_signals, ignore_stop_signals
 
 DEFAULT_GAMMA = 0.99
 """The discount of a flat step when none is given (:class:`hrlp.config.AdvantageConfig`'s default)."""
@@ -170,16 +173,19 @@ class Sampler:
         self.policy = policy
         self.normalizer = normalizer
         self.generator = torch.Generator().manual_seed(seed)
-        self._obs = np.asarray(self.vector_env.reset(seed=seed), dtype=np.float64).copy()
+        self.first_index = first_index
         n = self.num_envs
         self._ret = np.zeros(n)
         self._len = np.zeros(n, dtype=np.int64)
+        try:
+            self._obs = np.asarray(self.vector_env.reset(seed=seed), dtype=np.float64).copy()
+        except EnvError as e:
+            raise self._located(e) from None
         self.timing = Timing()
         self.last_raw_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations of the last batch
         self.last_raw_next_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations each step produced
         self.last_tau: np.ndarray | None = None  # [T, N] low-level steps of each decision
         self._requested: int | None = None
-        self.first_index = first_index
 
     @property
     def num_envs(self) -> int:
@@ -230,7 +236,10 @@ class Sampler:
                 actions_buf = np.empty((steps_per_env, *actions.shape))
             actions_buf[t] = actions
             t1 = time.perf_counter()
-            step = self.vector_env.step(rows)
+            try:
+                step = self.vector_env.step(rows)
+            except EnvError as e:  # the user's environment failed: name it by its run-wide index and its episode step
+                raise self._located(e) from None
             t2 = time.perf_counter()
             episode_steps = self._len + step.tau  # per environment, the step of its episode taken last
             rewards[t], discount[t] = step.rewards, step.discount
@@ -319,6 +328,15 @@ class Sampler:
                                  "stopped before it entered the normaliser, the networks or a checkpoint")  # fmt: skip
         raise AssertionError("_non_finite called with finite values")  # pragma: no cover
 
+    def _located(self, error: EnvError) -> EnvError:
+        """``error`` (raised by environment ``i`` of this sampler's vector environment) with the environment's index
+        among all the run's and, for a step, the step of its episode that failed."""
+        fault = error.fault
+        i = fault.index
+        step = None if fault.call == "reset" or not 0 <= i < self.num_envs else int(self._len[i]) + 1
+        return EnvError(dataclasses.replace(fault, index=self.first_index + i, episode_step=step,
+                                            decision=isinstance(self.vector_env, ManagerVectorEnv)))  # fmt: skip
+
     def _finish(self, i: int, step: VectorStep) -> Episode:
         """Environment ``i``'s episode, ended at ``step``; its running return and length start again."""
         no_test = step.infos.get(NO_SUCCESS_TEST)
@@ -356,6 +374,7 @@ class ParallelSampler:
     def __init__(self, env_fns: Sequence[Callable[[], gym.Env]], policy: Policy, normalizer: RunningNormalizer,
                  seed: int = 0, workers: int = 2, gamma: float | None = None) -> None:  # fmt: skip
         import multiprocessing as mp
+        from multiprocessing import util as mp_util
 
         if workers < 2 or workers > len(env_fns):
             raise ValueError(f"ParallelSampler needs 2 <= workers <= environments ({len(env_fns)}), got {workers}")
@@ -364,22 +383,34 @@ class ParallelSampler:
         self.last_raw_obs: np.ndarray | None = None
         bounds = np.linspace(0, len(env_fns), workers + 1).astype(int)
         ctx = mp.get_context("spawn")  # no fork: torch and MuJoCo state must not be shared with children
-        self._conns = []
-        self._procs = []
-        for w in range(workers):
-            parent, child = ctx.Pipe()
-            chunk = list(env_fns[bounds[w] : bounds[w + 1]])
-            args = (child, chunk, policy, normalizer.config(), seed + int(bounds[w]), seed + 7919 * w, int(bounds[w]),
-                    os.getpid(), gamma)  # fmt: skip
-            proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
-            proc.start()
-            child.close()
-            self._conns.append(parent)
-            self._procs.append(proc)
-        for conn in self._conns:
-            _receive(conn)  # each worker reports ready (or the error that stopped it)
+        self._conns: list[Any] = []
+        self._procs: list[Any] = []
         self.num_envs = len(env_fns)
         self._pending = False
+        # Workers left running by a run that ends in an exception (a stop signal mid-start-up included) are killed when
+        # this object goes or the interpreter exits: they ignore SIGTERM, which multiprocessing's exit would send them
+        # before waiting for them (its finalizers with an exit priority run first).
+        self._finalizer = mp_util.Finalize(self, _kill_workers, args=(self._procs, self._conns), exitpriority=10)
+        try:
+            for w in range(workers):
+                parent, child = ctx.Pipe()
+                self._conns.append(parent)
+                chunk = list(env_fns[bounds[w] : bounds[w + 1]])
+                # The policy goes as bytes and batches come back as arrays: torch's own pickling would share their
+                # memory through a server thread of the sender, which prints a traceback when the other side is killed
+                # mid-handshake (as a stop kills the workers).
+                args = (child, chunk, pickle.dumps(policy), normalizer.config(), seed + int(bounds[w]), seed + 7919 * w,
+                        int(bounds[w]), os.getpid(), gamma)  # fmt: skip
+                proc = ctx.Process(target=_sampler_worker, args=args, daemon=True)
+                self._procs.append(proc)  # before it starts: a stop as it starts (acted on right after) must find it
+                with children_ignore_stop_signals():  # a Ctrl-C while the worker imports torch is this process's
+                    proc.start()
+                child.close()
+            for conn in self._conns:
+                _receive(conn)  # each worker reports ready (or the error that stopped it)
+        except BaseException:
+            self._finalizer()
+            raise
 
     def collect(self, steps_per_env: int) -> tuple[Batch, list[Episode]]:
         """Every worker samples ``steps_per_env`` steps of its environments at once; returns the joined batch."""
@@ -394,18 +425,18 @@ class ParallelSampler:
             raise RuntimeError("request() while a batch is still being sampled; receive() it first")
         weights = {k: v.detach().cpu().numpy() for k, v in self.policy.state_dict().items()}
         stats = {k: v.numpy() for k, v in self.normalizer.state_dict().items()}
+        self._pending = True  # from the first message on: close() then kills the workers instead of waiting for them
         for conn in self._conns:
             conn.send(("collect", (weights, stats, steps_per_env)))
-        self._pending = True
 
     def receive(self) -> tuple[Batch, list[Episode]]:
         """Wait for the batch started by :meth:`request`; returns it joined in environment order."""
         if not self._pending:
             raise RuntimeError("receive() without a request()")
-        self._pending = False
         parts = [_receive(conn) for conn in self._conns]
+        self._pending = False
         fields = ("obs", "next_obs", "actions", "rewards", "terminated", "truncated", "discount")
-        joined = {f: torch.cat([p["batch"][f] for p in parts], dim=1) for f in fields}
+        joined = {f: torch.cat([torch.from_numpy(p["batch"][f]) for p in parts], dim=1) for f in fields}
         raw = np.concatenate([p["raw"] for p in parts], axis=1)
         self.last_raw_obs = raw
         if not self.normalizer.frozen:
@@ -432,7 +463,11 @@ class ParallelSampler:
             _receive(conn)
 
     def close(self) -> None:
-        """Stop the workers (closing their environments)."""
+        """Stop the workers: between batches they close their environments and end; in the middle of one (a run
+        stopped or failed while they sample, whose batch nobody will read) they are killed at once."""
+        if self._pending:
+            self._finalizer()
+            return
         for conn in self._conns:
             try:
                 conn.send(("close", None))
@@ -440,8 +475,19 @@ class ParallelSampler:
                 pass
         for proc in self._procs:
             proc.join(timeout=10)
-            if proc.is_alive():
-                proc.kill()
+        self._finalizer()  # any worker still alive
+
+
+def _kill_workers(procs: list[Any], conns: list[Any]) -> None:
+    """Kill every worker process still alive and wait for it (SIGKILL: workers ignore the stop signals)."""
+    started = [proc for proc in procs if proc.pid is not None]
+    for proc in started:
+        if proc.is_alive():
+            proc.kill()
+    for proc in started:
+        proc.join(timeout=10)
+    for conn in conns:
+        conn.close()
 
 
 def _receive(conn: Any) -> Any:
@@ -452,6 +498,8 @@ def _receive(conn: Any) -> Any:
         raise RuntimeError("a sampler worker process died") from None
     if kind == "non-finite":
         raise NonFiniteError(payload)
+    if kind == "env-error":  # the user's environment failed in the worker: the fault, as the worker's sampler named it
+        raise EnvError(payload)
     if kind == "error":
         raise RuntimeError(f"sampler worker failed: {payload}")
     return payload
@@ -472,19 +520,25 @@ def die_with_parent(parent_pid: int) -> None:
         os._exit(0)
 
 
-def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict, env_seed: int, noise_seed: int,
+def _sampler_worker(conn: Any, env_fns: list, policy_bytes: bytes, norm_config: dict, env_seed: int, noise_seed: int,
                     first_index: int = 0, parent_pid: int | None = None, gamma: float | None = None) -> None:  # fmt: skip
     """Worker loop: own environments, a policy copy and a frozen normaliser copy; answer collect/state requests.
 
-    It dies with its parent (:func:`die_with_parent`) and ends quietly when the parent's end of the pipe closes."""
+    It ignores the stop signals (the parent stops it: :mod:`hrlp.stopping`), dies with its parent
+    (:func:`die_with_parent`) and ends quietly when the parent's end of the pipe closes."""
+    ignore_stop_signals()
     if parent_pid is not None:
         die_with_parent(parent_pid)
     torch.set_num_threads(1)
     try:
+        policy: Policy = pickle.loads(policy_bytes)
         normalizer = RunningNormalizer.from_config({**norm_config, "frozen": True})
         sampler = Sampler(env_fns, policy, normalizer, seed=env_seed, first_index=first_index, gamma=gamma)
         sampler.generator.manual_seed(noise_seed)
         conn.send(("ok", None))
+    except EnvError as e:  # the first reset of a user's environment failed
+        conn.send(("env-error", e.fault))
+        return
     except Exception as e:  # reported to the parent, which raises it
         conn.send(("error", f"{type(e).__name__}: {e}"))
         return
@@ -504,8 +558,9 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
                 normalizer.load_state_dict(stats)
                 env0, inf0, phys0 = sampler.timing.env, sampler.timing.inference, sampler.timing.physics
                 batch, episodes = sampler.collect(steps)
+                fields = {f.name: getattr(batch, f.name) for f in dataclasses.fields(batch)}
                 reply = {
-                    "batch": {f.name: getattr(batch, f.name) for f in dataclasses.fields(batch)},
+                    "batch": {k: v.numpy() if isinstance(v, torch.Tensor) else v for k, v in fields.items()},
                     "episodes": episodes,
                     "raw": sampler.last_raw_obs,
                     "env": sampler.timing.env - env0,
@@ -523,6 +578,8 @@ def _sampler_worker(conn: Any, env_fns: list, policy: Policy, norm_config: dict,
             conn.send(("ok", reply))
         except NonFiniteError as e:  # the parent raises it as it is (it names the environment by its global index)
             conn.send(("non-finite", str(e)))
+        except EnvError as e:  # likewise: the fault record, sent as it is
+            conn.send(("env-error", e.fault))
         except Exception as e:  # reported to the parent, which raises it
             conn.send(("error", f"{type(e).__name__}: {e}"))
 

@@ -34,6 +34,7 @@ import gymnasium as gym
 import numpy as np
 
 from hrlp.envs.check import parameterised_dims
+from hrlp.envs.faults import reset_env, step_env
 
 NO_SUCCESS_TEST = "no_success_test"
 """Key of :attr:`VectorStep.infos`, ``[N]`` bool, present only on a step where some environment reports no success
@@ -238,7 +239,9 @@ class SerialVectorEnv:
     whose episode ended. Observations are flattened to float64 rows. ``success`` is ``info['success']`` (False where
     absent; :data:`NO_SUCCESS_TEST` then marks it), ``infos`` holds the scalar info values as arrays
     (:func:`info_arrays`), ``physics_seconds`` the growth of the environments' own ``physics_seconds`` counters over
-    the step and its resets (ArmEnv: CPU seconds inside ``mj_step``; NaN if an environment has none).
+    the step and its resets (ArmEnv: CPU seconds inside ``mj_step``; NaN if an environment has none). An environment
+    that raises, returns another number of values (the old Gym API) or an observation of another size than its space
+    is an :class:`~hrlp.envs.faults.EnvError` naming its index (:func:`~hrlp.envs.faults.step_env`).
     """
 
     def __init__(self, envs: Sequence[gym.Env], gamma: float = 0.99) -> None:
@@ -273,8 +276,8 @@ class SerialVectorEnv:
 
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Reset every environment (``i`` with ``seed + i``); returns ``obs [N, obs_dim]``."""
-        obs = [env.reset(seed=None if seed is None else seed + i)[0] for i, env in enumerate(self.envs)]
-        self._obs = np.stack(obs).astype(np.float64).reshape(self.num_envs, self._obs_dim)
+        obs = [reset_env(env, i, self._obs_dim, seed=None if seed is None else seed + i)[0] for i, env in enumerate(self.envs)]
+        self._obs = np.stack(obs)
         return self._obs.copy()
 
     def step(self, actions: np.ndarray) -> VectorStep:
@@ -289,15 +292,14 @@ class SerialVectorEnv:
         terminated, truncated, success = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
         infos: list[Mapping[str, Any]] = []
         physics0 = physics_seconds(self.envs)
-        for i, env in enumerate(self.envs):
-            o, r, term, trunc, info = env.step(decoded[i])
-            next_obs[i], rewards[i] = np.ravel(o), r
+        for i, env in enumerate(self.envs):  # a fault of an environment (it raises, or its result does not fit): EnvError
+            next_obs[i], rewards[i], term, trunc, info = step_env(env, decoded[i], i, self._obs_dim)
             terminated[i], truncated[i] = term, trunc and not term
             success[i] = bool(info_success(info))
             infos.append(info)
         obs = next_obs.copy()
         for i in np.flatnonzero(terminated | truncated):
-            obs[i] = np.ravel(self.envs[i].reset()[0])
+            obs[i] = reset_env(self.envs[i], int(i), self._obs_dim)[0]
         physics = physics_seconds(self.envs) - physics0
         self._obs = obs
         arrays = info_arrays(infos)

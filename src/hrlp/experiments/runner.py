@@ -34,6 +34,7 @@ from hrlp.arm.research.imitate import ImitationConfig
 from hrlp.atomic import LOCK_FILE, atomic_path, directory_lock
 from hrlp.checkpoint import checkpoint_exists
 from hrlp.experiments.presets import PRESETS, Preset
+from hrlp.stopping import Stopped, children_ignore_stop_signals, ignore_stop_signals
 from hrlp.train import TrainConfig
 from hrlp.training.sources import resolve_skills
 
@@ -218,13 +219,33 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
     """A pool of ``workers`` spawned processes that die with this one (``PR_SET_PDEATHSIG`` on Linux): a ``hrlp
-    reproduce`` stopped by SIGTERM or SIGKILL leaves no run training on behind it."""
+    reproduce`` stopped by SIGTERM or SIGKILL leaves no run training on behind it. They ignore the stop signals
+    (:mod:`hrlp.stopping`): this process stops them (:func:`kill_pool`)."""
     import multiprocessing as mp
 
+    return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_pool_worker_start,
+                               initargs=(os.getpid(),))  # fmt: skip
+
+
+def _pool_worker_start(parent_pid: int) -> None:
+    """A pool process's first step: ignore the stop signals, and die with the parent."""
     from hrlp.rollout import die_with_parent
 
-    return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
-                               initargs=(os.getpid(),))  # fmt: skip
+    ignore_stop_signals()
+    die_with_parent(parent_pid)
+
+
+def kill_pool(pool: ProcessPoolExecutor) -> None:
+    """Kill the pool's processes at once (SIGKILL: they ignore the stop signals) and cancel the jobs not started. A
+    job killed mid-way keeps its last checkpoint, which is whole whenever the kill comes (:mod:`hrlp.checkpoint`), and
+    resumes from it the next time."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # the executor keeps no public list
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        if proc.is_alive():
+            proc.kill()
+    for proc in processes:
+        proc.join(timeout=10)
 
 
 def reproduce(
@@ -288,13 +309,18 @@ def reproduce(
                 on_result(res)
         return results
     with process_pool(workers) as pool:
-        futures = [pool.submit(run_job, j, reuse) for j in jobs]
+        futures = []
         try:
+            with children_ignore_stop_signals():  # the pool's processes start here, and a Ctrl-C is this process's
+                futures += [pool.submit(run_job, j, reuse) for j in jobs]
             for f in as_completed(futures):
                 res = f.result()
                 results.append(res)
                 if on_result:
                     on_result(res)
+        except Stopped:  # the runs in progress keep their last checkpoints; the next reproduce resumes them
+            kill_pool(pool)
+            raise
         except BaseException:
             for f in futures:  # a failed job (e.g. a run directory another process holds) stops the jobs not started
                 f.cancel()

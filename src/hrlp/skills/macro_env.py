@@ -30,6 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 from hrlp.config import MicroAction
+from hrlp.envs.faults import EnvError, raised_in, reset_env, step_env
 from hrlp.envs.vector import NO_SUCCESS_TEST, VectorStep, check_num_envs, info_arrays, info_success, physics_seconds
 from hrlp.skills.core import DirectControl, Hierarchy, MacroStep, ObsLayout, ObsView, ParamBox, Skill, decide, initiated
 
@@ -142,7 +143,7 @@ class MacroEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         """Reset the low-level task."""
         super().reset(seed=seed)
-        obs, info = self.env.reset(seed=seed, options=options)
+        obs, info = reset_env(self.env, 0, seed=seed, options=options)  # SerialWorlds names the environment's index
         self._obs = self.observe(obs)
         self._ran = -1
         return self._obs.copy(), info
@@ -285,7 +286,7 @@ class SerialWorlds:
 
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Reset every environment (``i`` with ``seed + i``)."""
-        return np.stack([e.reset(seed=None if seed is None else seed + i)[0] for i, e in enumerate(self.envs)])
+        return np.stack([self._reset(i, None if seed is None else seed + i) for i in range(self.num_envs)])
 
     def advance(self, actions: np.ndarray, active: np.ndarray | None = None) -> VectorStep:
         """Step the environments where ``active``, one after another, in index order."""
@@ -298,7 +299,7 @@ class SerialWorlds:
         terminated, truncated, success = np.zeros(n, bool), np.zeros(n, bool), np.zeros(n, bool)
         infos: list[Mapping[str, Any]] = [{} for _ in range(n)]
         for i, e in zip(idx, envs, strict=True):
-            o, r, term, trunc, info = e.env.step(actions[i])
+            o, r, term, trunc, info = step_env(e.env, actions[i], int(i))  # a fault of the user's environment: EnvError
             next_obs[i], rewards[i] = e.observe(o), r
             terminated[i], truncated[i] = term, trunc and not term
             success[i] = bool(info_success(info))
@@ -313,7 +314,16 @@ class SerialWorlds:
 
     def reset_worlds(self, worlds: np.ndarray) -> np.ndarray:
         """Reset the environments ``worlds`` (each continuing its own random stream)."""
-        return np.stack([self.envs[i].reset()[0] for i in worlds])
+        return np.stack([self._reset(int(i)) for i in worlds])
+
+    def _reset(self, i: int, seed: int | None = None) -> np.ndarray:
+        """Environment ``i``'s reset; a fault of the user's environment is an EnvError naming ``i``."""
+        try:
+            return self.envs[i].reset(seed=seed)[0]
+        except EnvError as e:
+            raise EnvError(dataclasses.replace(e.fault, index=i)) from None
+        except Exception as e:
+            raise raised_in(self.envs[i].env, i, "reset", e) from e
 
     def measure(self, name: str, worlds: np.ndarray) -> np.ndarray:
         """Each environment's ``measure(name)``."""

@@ -62,13 +62,14 @@ def update_stat(stats: dict[str, float], name: str, default: float = math.nan) -
 def progress_line(label: str, stats: dict[str, float], total: int, elapsed_s: float, episodes: int | None = None) -> str:
     """One line for an iteration's statistics: what a log written to a file shows instead of a progress bar, e.g.
     ``train Reacher: iteration 3, 150,000/1,000,000 steps (15%), return -40.2, success 0.12, kl 0.0098, 2714 steps/s,
-    55 s``; with an episode budget ``episodes``, the episodes finished of it after the steps."""
+    55 s``; with an episode budget ``episodes``, the episodes finished of it after the steps. An iteration in which no
+    episode ended shows ``return -`` (never ``nan``)."""
     done = int(stats["env_steps"])
     total = max(total, done, 1)
     out = f"{label}: iteration {int(stats['iteration'])}, {done:,}/{total:,} steps ({done / total:.0%})"
     if episodes is not None and "episodes_total" in stats:
         out += f", {int(stats['episodes_total']):,}/{episodes:,} episodes"
-    out += f", return {stats['return_mean']:.1f}"
+    out += f", return {shown(stats['return_mean'], '.1f')}"
     if not math.isnan(stats["success_rate"]):
         out += f", success {stats['success_rate']:.2f}"
     if not math.isnan(kl := update_stat(stats, "kl")):  # an off-policy update has no KL step
@@ -76,11 +77,34 @@ def progress_line(label: str, stats: dict[str, float], total: int, elapsed_s: fl
     return out + f", {stats['time/steps_per_s']:.0f} steps/s, {elapsed_s:.0f} s"
 
 
+def shown(value: float, spec: str) -> str:
+    """``value`` formatted with ``spec`` for a progress report, or ``-`` where it is NaN (no episode ended in the
+    iteration, so there is no return to show) or missing."""
+    return "-" if value is None or math.isnan(value) else format(value, spec)
+
+
 def truncate_log(path: Path, iteration: int) -> None:
-    """Keep the header and the rows up to ``iteration`` (a kill between a row and its checkpoint leaves one row more)."""
+    """Keep the header and the rows up to ``iteration`` (a kill between a row and its checkpoint leaves one row more).
+
+    A row whose first column is not an iteration number (a damaged file) is a ValueError naming the file and the line,
+    before anything is rewritten."""
     rows = _read_csv(path)
     if rows:
-        _write_csv(path, [rows[0]] + [r for r in rows[1:] if r and int(float(r[0])) <= iteration])
+        kept = [r for n, r in enumerate(rows[1:], start=2) if r and row_iteration(path, n, r) <= iteration]
+        _write_csv(path, [rows[0], *kept])
+
+
+def row_iteration(path: Path, line: int, row: list[str]) -> int:
+    """The iteration number in the first column of ``row``, line ``line`` of the log ``path``; a ValueError naming
+    both where it is not one."""
+    try:
+        value = float(row[0])
+        if value.is_integer():
+            return int(value)
+    except ValueError:
+        pass
+    raise ValueError(f"{path}, line {line}: {row[0][:40]!r} where an iteration number belongs; the log is damaged: "
+                     "repair or remove that line")  # fmt: skip
 
 
 def _read_csv(path: Path) -> list[list[str]]:

@@ -32,6 +32,7 @@ from hrlp.checkpoint import (
     unpack_generators,
 )
 from hrlp.config import OFF_POLICY, TrainConfig
+from hrlp.envs.faults import EnvError
 from hrlp.policies.mlp import GaussianPolicy, ValueNet
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.rollout import (
@@ -43,9 +44,10 @@ from hrlp.rollout import (
     mean_or_nan,
 )
 from hrlp.skills.macro_env import MacroEnv
+from hrlp.stopping import raise_if_stopping, shielded
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
 from hrlp.training.loading import check_action_units, make_policy, warm_start
-from hrlp.training.logs import RunLogger, progress_line, truncate_log, update_stat
+from hrlp.training.logs import RunLogger, progress_line, shown, truncate_log, update_stat
 from hrlp.training.offpolicy import OffPolicyTrainer
 
 
@@ -433,11 +435,11 @@ def train(
         if resume:
             if not checkpoint_exists(checkpoint):
                 raise ValueError(f"--resume: {run_dir} has no checkpoint to continue from")
-            trainer = resume_trainer(checkpoint)
+            trainer = _reporting_env_faults(lambda: resume_trainer(checkpoint), resume)
         else:
             if checkpoint_exists(checkpoint):
                 raise ValueError(f"{run_dir} already holds a run; pass --resume to continue it or choose another --run-dir")
-            trainer = OffPolicyTrainer(cfg) if cfg.algo in OFF_POLICY else Trainer(cfg)
+            trainer = _reporting_env_faults(lambda: OffPolicyTrainer(cfg) if cfg.algo in OFF_POLICY else Trainer(cfg), resume)
             cfg = trainer.cfg  # with the number of workers it uses: config.json and the checkpoint record it
         logger: RunLogger | None = None
         try:  # from here on, whatever fails, the sampler (and its worker processes) is closed
@@ -454,23 +456,29 @@ def train(
             # Rows past the checkpoint (all of them for a run killed before its first one) are written again.
             truncate_log(run_dir / "progress.csv", trainer.iteration)
             config_path = run_dir / "config.json"
-            with writing(config_path):
+            with shielded(), writing(config_path):  # a stop signal waits for the file to be whole
                 config_path.write_text(json.dumps(cfg.to_json(), indent=2))
             if on_start is not None:
                 on_start(plan_steps(cfg, trainer.env_steps))
             logger = RunLogger(run_dir)
             streak = 0
             while not budget_spent(cfg, trainer.env_steps, trainer.episodes_done):
-                stats = trainer.iterate()
+                raise_if_stopping()  # a stop signal whose exception went astray (hrlp.stopping) is acted on here
+                try:
+                    stats = trainer.iterate()
+                except EnvError as e:  # the user's environment failed: which iteration, and where the run stands
+                    raise e.adding(iteration=trainer.iteration + 1, run_state=run_state(trainer)) from None
                 # The log row first, then the checkpoint: a kill between the two leaves a row past the checkpoint,
                 # which a resume drops and writes again; the other order would leave the iteration out of the log.
-                logger.log(stats)
-                try:
-                    trainer.save(checkpoint)
-                except BaseException:  # a refused or failed save: the log goes back to the checkpoint it matches
-                    with contextlib.suppress(OSError):
-                        truncate_log(run_dir / "progress.csv", trainer.iteration - 1)
-                    raise
+                # A stop signal (hrlp.stopping) waits for both: the iteration is kept whole, or dropped before this.
+                with shielded():
+                    logger.log(stats)
+                    try:
+                        trainer.save(checkpoint)
+                    except BaseException:  # a refused or failed save: the log goes back to the checkpoint it matches
+                        with contextlib.suppress(OSError):
+                            truncate_log(run_dir / "progress.csv", trainer.iteration - 1)
+                        raise
                 streak = 0 if update_stat(stats, "accepted", 1.0) else streak + 1
                 if warn_after_rejected > 0 and streak == warn_after_rejected:
                     warn(rejected_steps_message(streak, cfg, trainer.iteration))
@@ -479,6 +487,25 @@ def train(
             if logger is not None:
                 logger.close()
             trainer.close()
+
+
+def run_state(trainer: Trainer | OffPolicyTrainer | None, resumed: bool = False) -> str:
+    """Where a run that ends in an error stands on disk: its last checkpoint (every iteration is saved as it ends), or
+    that nothing was saved."""
+    if trainer is None:
+        return "the run's checkpoint is as it was; --resume continues it" if resumed else "nothing was saved"
+    if trainer.iteration == 0:
+        return "nothing was saved (the first iteration had not ended)"
+    return (f"the run's last checkpoint (iteration {trainer.iteration}, {trainer.env_steps:,} steps) is intact; --resume "
+            "continues it")  # fmt: skip
+
+
+def _reporting_env_faults(build: Callable[[], Trainer | OffPolicyTrainer], resumed: bool) -> Trainer | OffPolicyTrainer:
+    """``build()``; a fault of the user's environment while it starts (its first reset) says where the run stands."""
+    try:
+        return build()
+    except EnvError as e:
+        raise e.adding(run_state=run_state(None, resumed)) from None
 
 
 @dataclass
@@ -559,7 +586,7 @@ def train_with_progress(cfg: TrainConfig, run_dir: Path, resume: bool = False, c
             progress.console.print(f"[bold yellow]warning:[/] {message}", soft_wrap=True)
 
         for st in train(cfg, run_dir, resume=resume, on_start=started, on_warning=warned):
-            status = f"return {st['return_mean']:.1f}"
+            status = f"return {shown(st['return_mean'], '.1f')}"  # '-': no episode ended in the iteration
             if not math.isnan(st["success_rate"]):
                 status += f"  success {st['success_rate']:.2f}"
             if cfg.episodes is not None:
