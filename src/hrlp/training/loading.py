@@ -141,6 +141,24 @@ def load_trained(run_dir: Path) -> TrainedPolicy:
     return TrainedPolicy(policy, normalizer, TrainConfig.from_json(meta["config"]), meta)  # checked by load_policy
 
 
+def run_meta(trainer: Any) -> dict[str, Any]:
+    """The metadata every trainer's checkpoint holds (on-policy or off-policy alike): its sampler's state, what it trains
+    (flat or Manager, the skills' hashes, the action units, the config), its progress counters and its normaliser."""
+    cfg = trainer.cfg
+    return {
+        "sampler": trainer.sampler.get_state(),
+        "kind": "flat" if cfg.macro is None else "manager",
+        "skills": trainer.skill_hashes,
+        "action_units": trainer.action_units,
+        "config": cfg.to_json(),
+        "iteration": trainer.iteration,
+        "env_steps": trainer.env_steps,
+        "episodes_done": trainer.episodes_done,
+        "normalizer": trainer.normalizer.config(),
+        "obs_dim": trainer.obs_dim,
+    }
+
+
 def make_policy(cfg: TrainConfig, obs_dim: int, space: gym.Space) -> Policy:
     """The policy network of ``cfg``'s runs for ``space``: SAC's squashed actor for an off-policy run, else
     :func:`~hrlp.policies.mlp.policy_for_space`'s (with ``cfg.init_log_std``)."""

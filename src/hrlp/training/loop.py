@@ -46,7 +46,7 @@ from hrlp.rollout import (
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.stopping import raise_if_stopping, shielded
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
-from hrlp.training.loading import check_action_units, make_policy, warm_start
+from hrlp.training.loading import check_action_units, make_policy, run_meta, warm_start
 from hrlp.training.logs import RunLogger, progress_line, shown, truncate_log, update_stat
 from hrlp.training.offpolicy import OffPolicyTrainer
 
@@ -197,19 +197,7 @@ class Trainer:
         tensors.update(self.update.state())
         if self.pending_value_fit is not None:
             tensors["pending_value_fit.obs"], tensors["pending_value_fit.returns"] = self.pending_value_fit
-        meta = {
-            **rng_meta,
-            "sampler": self.sampler.get_state(),
-            "kind": "flat" if self.cfg.macro is None else "manager",
-            "skills": self.skill_hashes,
-            "action_units": self.action_units,
-            "config": self.cfg.to_json(),
-            "iteration": self.iteration,
-            "env_steps": self.env_steps,
-            "episodes_done": self.episodes_done,
-            "normalizer": self.normalizer.config(),
-            "obs_dim": self.obs_dim,
-        }
+        meta = {**rng_meta, **run_meta(self)}
         if isinstance(self.policy, GaussianPolicy):
             meta["act_dim"] = int(self.policy.log_std.numel())
         if self.init_from_sha256 is not None:

@@ -29,7 +29,7 @@ from hrlp.rollout import Episode, NonFiniteError, Sampler, first_non_finite, mea
 from hrlp.skills.core import ObsLayout
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
-from hrlp.training.loading import check_action_units
+from hrlp.training.loading import check_action_units, run_meta
 
 __all__ = ["GOAL_KEYS", "OffPolicyTrainer", "goal_spec"]
 
@@ -175,16 +175,7 @@ class OffPolicyTrainer:
         tensors.update(buffer_tensors)
         meta = {
             **rng_meta,
-            "sampler": self.sampler.get_state(),
-            "kind": "flat" if self.cfg.macro is None else "manager",
-            "skills": self.skill_hashes,
-            "action_units": self.action_units,
-            "config": self.cfg.to_json(),
-            "iteration": self.iteration,
-            "env_steps": self.env_steps,
-            "episodes_done": self.episodes_done,
-            "normalizer": self.normalizer.config(),
-            "obs_dim": self.obs_dim,
+            **run_meta(self),
             "replay": buffer_meta,
             "decisions": self.decisions,
             "gradient_steps": self.gradient_steps,
