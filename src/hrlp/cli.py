@@ -274,16 +274,52 @@ def demo(
 
 
 @app.command()
-def presets() -> None:
-    """List the paper's experiments as presets (runs, seeds, default budget)."""
+def presets(
+    name: Annotated[str | None, typer.Argument(help="A preset to show whole: its description and its runs.")] = None,
+) -> None:
+    """List the paper's experiments as presets (runs, seeds, default budget), a line each; with NAME, one preset whole."""
     from hrlp.experiments.presets import PRESETS
 
-    table = Table(title="presets (hrlp reproduce PRESET)")
-    for col in ("preset", "paper", "runs", "seeds", "budget", "metric", "description"):
-        table.add_column(col)
-    for p in PRESETS.values():
-        table.add_row(p.name, p.source, str(len(p.runs)), str(len(p.seeds)), f"{p.budget:,}", p.metric, p.description)
-    console.print(table)
+    if name is not None:
+        if name not in PRESETS:
+            raise ValueError(f"no preset {name!r}; the presets: {', '.join(PRESETS)}")
+        p = PRESETS[name]
+        console.print(f"[bold]{p.name}[/] ({p.source}): {len(p.runs)} runs x {len(p.seeds)} seeds, {p.budget:,} steps each, "
+                      f"metric {p.metric}", soft_wrap=False, highlight=False)  # fmt: skip
+        console.print(p.description, highlight=False)
+        for run in p.runs:
+            console.print(f"  {run.name}", highlight=False)
+        console.print(f"run it: hrlp reproduce {p.name}", highlight=False)
+        return
+    rows = [(p.name, str(len(p.runs)), str(len(p.seeds)), f"{p.budget:,}", f"{p.source}: {p.description}")
+            for p in PRESETS.values()]  # fmt: skip
+    _one_line_table("presets: hrlp reproduce PRESET runs one, hrlp presets PRESET shows it whole",
+                    ("preset", "runs", "seeds", "budget", "paper: description"), rows)  # fmt: skip
+
+
+def _one_line_table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:
+    """A table of one line per row at any terminal width: every column as wide as its longest entry, but the last, which
+    takes what is left and ends in an ellipsis where it does not fit (shown whole when written to a file or a pipe)."""
+    from rich.cells import cell_len, set_cell_size
+    from rich.text import Text
+
+    widths = [max(cell_len(Text.from_markup(r[i]).plain) for r in [columns, *rows]) for i in range(len(columns) - 1)]
+    room = console.width - sum(widths) - 2 * len(widths) if console.is_terminal else 10**6
+
+    def line(cells: tuple[str, ...]) -> Text:
+        out = Text()
+        for cell, w in zip(cells, widths, strict=False):
+            text = Text.from_markup(cell)
+            out.append_text(text)
+            out.append(" " * (w - cell_len(text.plain) + 2))
+        last = cells[-1]
+        out.append(last if cell_len(last) <= room else set_cell_size(last, max(room - 1, 0)) + "…")
+        return out
+
+    console.print(title, highlight=False)
+    console.print(line(columns), style="bold", soft_wrap=True)
+    for r in rows:
+        console.print(line(r), soft_wrap=True, highlight=False)
 
 
 @app.command()
@@ -1365,9 +1401,7 @@ def skills_list(library: _LIBRARY = None) -> None:
     lib, shipped = SkillLibrary(library), SkillLibrary(shipped_library_root())
     if not lib.root.is_dir():
         err_console.print(f"note: no library at {escape(str(lib.root))} yet ('hrlp skills add' makes it): shipped skills only")
-    table = Table(title=escape(f"skills in {lib.root} and shipped with hrlp"))
-    for col in ("name", "task", "params", "features", "k", "trained steps", "sha256", "from"):
-        table.add_column(col)
+    rows: list[tuple[str, ...]] = []
     seen: set[str] = set()
     broken: list[str] = []
     for source, where in ((lib, "library"), (shipped, "shipped")):
@@ -1378,12 +1412,13 @@ def skills_list(library: _LIBRARY = None) -> None:
             try:
                 m = source.manifest(name)
             except ValueError as e:  # CheckpointError included: one entry's problem, not the listing's
-                table.add_row(escape(name), "[red]broken[/]", "", "", "", "", "", where)
+                rows.append((escape(name), "[red]broken[/]", "", "", "", where, ""))
                 broken.append(str(e))
                 continue
-            table.add_row(name, m["task"], str(m["param"]["dim"]), ", ".join(m.get("features", [])) or "-", str(m["k"]),
-                          f"{m['trained']['env_steps']:,}", m["sha256"][:12], where)  # fmt: skip
-    console.print(table)
+            rows.append((name, m["task"], str(m["param"]["dim"]), str(m["k"]), f"{m['trained']['env_steps']:,}", where,
+                         ", ".join(m.get("features", [])) or "-"))  # fmt: skip
+    _one_line_table(escape(f"skills in {lib.root} and shipped with hrlp (hrlp skills show NAME: one whole)"),
+                    ("name", "task", "params", "k", "steps", "from", "features"), rows)  # fmt: skip
     for reason in broken:
         err_console.print(f"[yellow]broken:[/] {escape(reason)}")
 

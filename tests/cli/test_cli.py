@@ -20,3 +20,26 @@ def test_theory_command_prints_a_table_per_statement_and_rejects_bad_input(tmp_p
     assert "Lemma 1" in result.output and "Theorem 1" in result.output and "Corollary 1" in result.output
     bad = runner.invoke(app, ["theory", "--mdps", "0"])
     assert bad.exit_code == 2 and "--mdps must be a positive integer" in bad.output
+
+
+def test_presets_and_skills_read_at_80_columns_one_line_each(monkeypatch):
+    import io
+
+    from rich.console import Console
+
+    from hrlp import cli
+    from hrlp.experiments.presets import PRESETS
+
+    for args, entries in ((["presets"], len(PRESETS)), (["skills", "list"], None)):
+        buf = io.StringIO()
+        monkeypatch.setattr(cli, "console", Console(file=buf, force_terminal=True, width=80, color_system=None))
+        assert CliRunner().invoke(app, args).exit_code == 0
+        lines = buf.getvalue().splitlines()
+        assert max(map(len, lines)) <= 80, args
+        if entries is not None:  # a title, a header and one line per preset
+            assert len(lines) == entries + 2 and lines[2].startswith("shipped-skills ") and lines[2].endswith("…")
+    monkeypatch.undo()
+    r = CliRunner().invoke(app, ["presets", "reach-and-grip-1"])
+    assert r.exit_code == 0 and "gripper+reacher,c2=3,tr=0.03" in r.output and "hrlp reproduce reach-and-grip-1" in r.output
+    bad = CliRunner().invoke(app, ["presets", "nope"])
+    assert bad.exit_code != 0 and "no preset 'nope'" in bad.output and "Traceback" not in bad.output
