@@ -25,8 +25,10 @@ from hrlp.policies.mlp import GaussianPolicy, Policy, policy_for_space
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.policies.sac import SACActor
 from hrlp.rollout import (
+    Episode,
     action_decoder,
     build_vector_env,
+    mean_or_nan,
 )
 from hrlp.skills.core import ObsLayout, ParamBox
 from hrlp.skills.library import GAUSSIAN_ACTOR, SQUASHED_ACTOR
@@ -156,6 +158,21 @@ def run_meta(trainer: Any) -> dict[str, Any]:
         "episodes_done": trainer.episodes_done,
         "normalizer": trainer.normalizer.config(),
         "obs_dim": trainer.obs_dim,
+    }
+
+
+def iteration_stats(trainer: Any, episodes: list[Episode]) -> dict[str, float]:
+    """The statistics every trainer logs for an iteration that finished ``episodes``: its counters, and the episodes'
+    mean return, length, success rate and TargetDistSum (NaN where none ended or none has the figure)."""
+    return {
+        "iteration": trainer.iteration,
+        "env_steps": trainer.env_steps,
+        "episodes": len(episodes),
+        "episodes_total": trainer.episodes_done,
+        "return_mean": mean_or_nan([e.ret for e in episodes]),
+        "episode_length": mean_or_nan([e.length for e in episodes]),
+        "success_rate": mean_or_nan([e.success for e in episodes]),
+        "target_dist_sum": mean_or_nan([e.target_dist_sum for e in episodes]),
     }
 
 

@@ -41,12 +41,11 @@ from hrlp.rollout import (
     ParallelSampler,
     Sampler,
     first_non_finite,
-    mean_or_nan,
 )
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.stopping import raise_if_stopping, shielded
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
-from hrlp.training.loading import check_action_units, make_policy, run_meta, warm_start
+from hrlp.training.loading import check_action_units, iteration_stats, make_policy, run_meta, warm_start
 from hrlp.training.logs import RunLogger, progress_line, shown, truncate_log, update_stat
 from hrlp.training.offpolicy import OffPolicyTrainer
 
@@ -147,14 +146,7 @@ class Trainer:
         self.episodes_done += len(episodes)
         wall = t2 - t0
         out: dict[str, float] = {
-            "iteration": self.iteration,
-            "env_steps": self.env_steps,
-            "episodes": len(episodes),
-            "episodes_total": self.episodes_done,
-            "return_mean": mean_or_nan([e.ret for e in episodes]),
-            "episode_length": mean_or_nan([e.length for e in episodes]),
-            "success_rate": mean_or_nan([e.success for e in episodes]),
-            "target_dist_sum": mean_or_nan([e.target_dist_sum for e in episodes]),
+            **iteration_stats(self, episodes),
             **{f"{self.update.name}/{k}": v for k, v in stats.items()},
             "value/explained_variance_before": math.nan if vstats is None else vstats.explained_variance_before,
             "value/explained_variance_after": math.nan if vstats is None else vstats.explained_variance_after,

@@ -29,7 +29,7 @@ from hrlp.rollout import Episode, NonFiniteError, Sampler, first_non_finite, mea
 from hrlp.skills.core import ObsLayout
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
-from hrlp.training.loading import check_action_units, run_meta
+from hrlp.training.loading import check_action_units, iteration_stats, run_meta
 
 __all__ = ["GOAL_KEYS", "OffPolicyTrainer", "goal_spec"]
 
@@ -130,14 +130,7 @@ class OffPolicyTrainer:
         self.episodes_done += len(episodes)
         wall = time.perf_counter() - t0
         out: dict[str, float] = {
-            "iteration": self.iteration,
-            "env_steps": self.env_steps,
-            "episodes": len(episodes),
-            "episodes_total": self.episodes_done,
-            "return_mean": mean_or_nan([e.ret for e in episodes]),
-            "episode_length": mean_or_nan([e.length for e in episodes]),
-            "success_rate": mean_or_nan([e.success for e in episodes]),
-            "target_dist_sum": mean_or_nan([e.target_dist_sum for e in episodes]),
+            **iteration_stats(self, episodes),
             **{f"sac/{k}": mean_or_nan([getattr(st, k) for st in stats]) for k in SACStats.__dataclass_fields__},
             "sac/gradient_steps": self.gradient_steps,
             "sac/buffer_size": self.buffer.size,
