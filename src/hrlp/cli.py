@@ -1395,16 +1395,15 @@ def skills_list(library: _LIBRARY = None) -> None:
     A broken entry is listed too, marked 'broken', with its one-line reason on stderr; the others are listed as usual."""
     from rich.markup import escape
 
-    from hrlp.arm.skill_files import shipped_library_root
-    from hrlp.skills import SkillLibrary
+    from hrlp.skills import SkillLibrary, shipped_roots
 
-    lib, shipped = SkillLibrary(library), SkillLibrary(shipped_library_root())
+    lib = SkillLibrary(library)
     if not lib.root.is_dir():
         err_console.print(f"note: no library at {escape(str(lib.root))} yet ('hrlp skills add' makes it): shipped skills only")
     rows: list[tuple[str, ...]] = []
     seen: set[str] = set()
     broken: list[str] = []
-    for source, where in ((lib, "library"), (shipped, "shipped")):
+    for source, where in ((lib, "library"), *((SkillLibrary(root), "shipped") for root in shipped_roots())):
         for name in source.names():
             if name in seen:
                 continue
@@ -1415,7 +1414,8 @@ def skills_list(library: _LIBRARY = None) -> None:
                 rows.append((escape(name), "[red]broken[/]", "", "", "", where, ""))
                 broken.append(str(e))
                 continue
-            rows.append((name, m["task"], str(m["param"]["dim"]), str(m["k"]), f"{m['trained']['env_steps']:,}", where,
+            task = str(m["task"]).rpartition(":")[2]  # a module's environment by its id: the row fits 80 columns
+            rows.append((name, task, str(m["param"]["dim"]), str(m["k"]), f"{m['trained']['env_steps']:,}", where,
                          ", ".join(m.get("features", [])) or "-"))  # fmt: skip
     _one_line_table(escape(f"skills in {lib.root} and shipped with hrlp (hrlp skills show NAME: one whole)"),
                     ("name", "task", "params", "k", "steps", "from", "features"), rows)  # fmt: skip
@@ -1430,11 +1430,10 @@ def skills_show(name: Annotated[str, typer.Argument(help="Skill name.")], librar
 
     from rich.markup import escape
 
-    from hrlp.arm.skill_files import shipped_library_root
-    from hrlp.skills import SkillLibrary, locate_skill
+    from hrlp.skills import SkillLibrary, locate_skill, shipped_roots
 
     try:  # the library first, then the shipped skills; a name with a path in it is refused, never followed
-        m = locate_skill(name, [SkillLibrary(library).root, shipped_library_root()]).manifest(name)
+        m = locate_skill(name, [SkillLibrary(library).root, *shipped_roots()]).manifest(name)
     except ValueError as e:
         raise _fail(escape(str(e))) from None
     console.print_json(json.dumps(m))
@@ -1470,6 +1469,13 @@ def skills_add(
         ),
     ] = None,
     done_within: Annotated[float | None, typer.Option(help="Distance for --done-part.", callback=check.real(0.0))] = None,
+    bind: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="OWN_PART=PART[,PART...]: read one of the run's observation parts from the parts of that name (joined "
+            "in order) wherever the skill runs, e.g. achieved_goal=grip_pos; repeatable."
+        ),
+    ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace a skill of the same name.")] = False,
     library: _LIBRARY = None,
 ) -> None:
@@ -1484,17 +1490,20 @@ def skills_add(
         lib = SkillLibrary(library)
         if task.removeprefix("hrlp/").removesuffix("-v0") in PARAM_SPECS:
             if given := [f"--{o.replace('_', '-')}" for o, v in (("param", param), ("low", low), ("high", high),
-                                                                 ("done_part", done_part), ("done_within", done_within))
+                                                                 ("done_part", done_part), ("done_within", done_within),
+                                                                 ("bind", bind or None))
                          if v is not None]:  # fmt: skip
                 raise ValueError(f"{', '.join(given)}: an arm skill's parameters are its task's ({task}); leave them out")
             path = add_run(lib, run_dir, name, k=15 if k is None else k, overwrite=overwrite)
         else:
+            from hrlp.skills.policy import parse_bind
             from hrlp.training.loading import policy_skill_files
 
             part = "desired_goal" if param is None else (None if param == "none" else param)
             tensors, manifest = policy_skill_files(run_dir, param=part, low=_numbers(low, "--low"),
                                                    high=_numbers(high, "--high"), k=10 if k is None else k,
-                                                   done_part=done_part, done_within=done_within)  # fmt: skip
+                                                   done_part=done_part, done_within=done_within,
+                                                   bind=parse_bind(bind or ()))  # fmt: skip
             path = lib.save(name, tensors, manifest, overwrite=overwrite)
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None

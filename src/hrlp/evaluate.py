@@ -216,8 +216,7 @@ def _capsule_target_spans(env: gym.Env) -> tuple[slice, slice] | None:
     tasks, :attr:`hrlp.arm.env.ArmEnv.observation_parts`), for the reach-and-move figures; None for any other
     environment. Closes ``env``."""
     try:
-        layout = env.layout if isinstance(env, MacroEnv) else ObsLayout.of_space(
-            env.observation_space, getattr(env.unwrapped, "observation_parts", None))  # fmt: skip
+        layout = env.layout if isinstance(env, MacroEnv) else ObsLayout.of_env(env)
     finally:
         env.close()
     if "capsule" in layout.names and "target" in layout.names:

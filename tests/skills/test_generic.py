@@ -17,8 +17,8 @@ import goal_envs
 from hrlp.cli import app
 from hrlp.config import MacroSpec, MicroAction, SACConfig, TrainConfig
 from hrlp.evaluate import evaluate_run
-from hrlp.skills import DirectControl, ObsLayout, ObsView, ParamBox, ScriptedSkill
-from hrlp.skills.core import Hierarchy, decide, initiated
+from hrlp.skills import DirectControl, Holding, ObsLayout, ObsView, ParamBox, ScriptedSkill
+from hrlp.skills.core import Hierarchy, Seeing, decide, initiated, register_observation_parts
 from hrlp.skills.library import SkillLibrary
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.train import env_factory, train, train_with_progress
@@ -265,6 +265,80 @@ def test_a_tampered_policy_skill_manifest_is_refused_in_one_line(trained, tmp_pa
     with pytest.raises(ValueError, match=message) as e:
         resolve_skill("point", lib)
     assert "\n" not in str(e.value) and "skill 'point'" in str(e.value)
+
+
+class NamedPoint(goal_envs.PointGoal):
+    """PointGoal under another id, whose ``observation`` a domain names the parts of: ``pos`` and ``vel``."""
+
+
+gym.register("NamedPoint-v0", entry_point=NamedPoint, max_episode_steps=40)
+register_observation_parts("NamedPoint-v0", {"pos": ("observation", 0, 2), "vel": ("observation", 2, 4)})
+
+
+def test_a_dict_layout_takes_parts_a_domain_names_inside_its_keys_and_refuses_bad_ones_in_one_line():
+    space = gym.make(TASK).observation_space  # achieved_goal, desired_goal, observation: 2 + 2 + 4 numbers
+    layout = ObsLayout.of_space(space, {"vel": ("observation", 2, 4)})
+    assert layout.span("vel") == slice(6, 8) and layout.span("observation") == slice(4, 8) and layout.dim == 8
+    for bad, message in (({"v": ("nothing", 0, 1)}, "must be \\(key, start, stop\\) inside one of the keys"),
+                         ({"v": ("observation", 2, 5)}, "spans \\[2, 5\\) of 'observation', which has 4 numbers"),
+                         ({"v": slice(0, 2)}, "must be \\(key, start, stop\\)")):  # fmt: skip
+        with pytest.raises(ValueError, match=message):
+            ObsLayout.of_space(space, bad)
+    env = gym.make("NamedPoint-v0")  # the parts a domain declared for the id, found from the environment
+    assert ObsLayout.of_env(env).span("pos") == slice(4, 6) and "pos" in MacroEnv(env, [goal_envs.reach]).layout.names
+    assert "pos" not in ObsLayout.of_env(gym.make(TASK)).names
+
+
+def test_a_learned_skill_reads_its_parts_under_the_names_they_have_where_it_runs(trained, tmp_path):
+    env = gym.make("NamedPoint-v0")
+    layout = ObsLayout.of_env(env)
+    rows = np.stack([gym.spaces.flatten(env.observation_space, env.observation_space.sample()) for _ in range(5)])
+    view, params = ObsView(rows, layout, np.arange(5)), np.random.default_rng(1).uniform(-1, 1, (5, 2))
+    rows[:, layout.span("achieved_goal")] = rows[:, layout.span("pos")]  # a consistent state: achieved_goal is pos
+    plain = from_run(trained / "flat", "point", low=-1, high=1)
+    moved = rows.copy()  # the same state with achieved_goal scrambled: a bound skill reads the position from pos
+    moved[:, layout.span("achieved_goal")] = 5.0
+    moved_view = ObsView(moved, layout, np.arange(5))
+    bound = from_run(
+        trained / "flat", "point", low=-1, high=1, bind={"achieved_goal": ("pos",), "observation": ("pos", "vel")}
+    )
+    assert set(bound.reads) == {"pos", "vel"}
+    np.testing.assert_allclose(bound.act(moved_view, params), plain.act(view, params), atol=1e-12)
+    lib = tmp_path / "lib"  # the binding travels in the skill's file
+    r = CliRunner().invoke(app, ["skills", "add", str(trained / "flat"), "--name", "bound", "--library", str(lib), "--low",
+                                 "-1", "--high", "1", "--bind", "achieved_goal=pos", "--bind",
+                                 "observation=pos,vel"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    loaded = resolve_skill("bound", lib)
+    assert loaded.bind == {"achieved_goal": ("pos",), "observation": ("pos", "vel")}
+    np.testing.assert_allclose(loaded.act(moved_view, params), plain.act(view, params), atol=1e-5)
+    wide = r"reads 2 numbers of part 'achieved_goal' \(bound to vel\+pos\); this environment has 4"
+    for bind, message in (({"achieved_goal": ("vel", "pos")}, wide),
+                          ({"achieved_goal": ("speed",)}, r"reads the observation part\(s\) speed")):  # fmt: skip
+        with pytest.raises(ValueError, match=message):
+            MacroEnv(env, [from_run(trained / "flat", "point", low=-1, high=1, bind=bind)])
+    with pytest.raises(ValueError, match="bind names 'desired_goal', which is not one of the parts it reads"):
+        from_run(trained / "flat", "point", low=-1, high=1, bind={"desired_goal": ("pos",)})
+    r = CliRunner().invoke(app, ["skills", "add", str(trained / "flat"), "--name", "b2", "--library", str(lib), "--low", "-1",
+                                 "--high", "1", "--bind", "achieved_goal"])  # fmt: skip
+    assert r.exit_code != 0 and "write OWN_PART=PART[,PART...]" in r.output
+
+
+def test_a_held_action_entry_and_a_part_shown_as_a_constant_wrap_any_skill():
+    env = gym.make(TASK)
+    layout = ObsLayout.of_space(env.observation_space)
+    rows = np.stack([gym.spaces.flatten(env.observation_space, env.observation_space.sample()) for _ in range(4)])
+    view, goal = ObsView(rows, layout, np.arange(4)), np.zeros((4, 2))
+    held = Holding(goal_envs.reach, {1: 0.5}, "reach_x")
+    out, inner = held.act(view, goal), goal_envs.reach.act(view, goal)
+    np.testing.assert_array_equal(out[:, 0], inner[:, 0])
+    assert (out[:, 1] == 0.5).all() and held.name == "reach_x" and held.params == goal_envs.reach.params
+    with pytest.raises(ValueError, match=r"holds action entries \[2\]; this environment's action has 2 numbers"):
+        MacroEnv(env, [Holding(goal_envs.reach, {2: 1.0})])
+    blind = Seeing(goal_envs.reach, {"achieved_goal": [0.25, -0.5]})  # it sees itself at (0.25, -0.5) wherever it is
+    np.testing.assert_allclose(blind.act(view, goal), np.clip(8.0 * (goal - [0.25, -0.5]), -1, 1))
+    with pytest.raises(ValueError, match="is shown 3 numbers as part 'achieved_goal', which has 2"):
+        MacroEnv(env, [Seeing(goal_envs.reach, {"achieved_goal": [0, 0, 0]})])
 
 
 def test_skills_add_refuses_bad_parameter_settings_in_one_line(trained, tmp_path):

@@ -3,12 +3,13 @@
 :mod:`hrlp.skills.sb3`), the skill library on disk (:mod:`hrlp.skills.library`) and the Manager's environment
 (:mod:`hrlp.skills.macro_env`). The arm's skills are in :mod:`hrlp.arm`."""
 
-from hrlp.skills.core import DirectControl, ObsLayout, ObsView, ParamBox, ScriptedSkill, Skill
+from hrlp.skills.core import DirectControl, Holding, ObsLayout, ObsView, ParamBox, ScriptedSkill, Skill
 from hrlp.skills.library import SkillLibrary, default_library_root, load_skill, locate_skill, shipped_roots
 from hrlp.skills.policy import PolicySkill, from_sb3
 
 __all__ = [
     "DirectControl",
+    "Holding",
     "ObsLayout",
     "ObsView",
     "ParamBox",

@@ -27,6 +27,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from hrlp.domains import load_domains
+
 #: The part name of a whole flat (Box) observation whose environment declares no parts.
 WHOLE = "observation"
 
@@ -50,18 +52,31 @@ class ObsLayout:
         object.__setattr__(self, "_spans", spans)  # looked up at every skill step
 
     @classmethod
-    def of_space(cls, space: gym.Space, named: Mapping[str, slice] | None = None) -> ObsLayout:
+    def of_space(cls, space: gym.Space, named: Mapping[str, Any] | None = None) -> ObsLayout:
         """The layout of ``space`` flattened as :func:`gymnasium.spaces.flatten` does: a Dict's keys in the space's
         order (each a Box, flattened), or for a Box the parts ``named`` declares (the domain's, e.g. the arm's hand and
-        capsule) or one part :data:`WHOLE`. Raises a one-line ValueError for other spaces."""
+        capsule) or one part :data:`WHOLE`. For a Dict, ``named`` adds parts inside its keys: ``name -> (key, start,
+        stop)`` (e.g. Fetch's ``grip_pos``, numbers 0 to 3 of its ``observation``). Raises a one-line ValueError for
+        other spaces."""
         if isinstance(space, gym.spaces.Dict):
-            parts, at = [], 0
+            parts, at, starts = [], 0, {}
             for key, sub in space.spaces.items():
                 if not isinstance(sub, gym.spaces.Box):
                     raise ValueError(f"observation part {key!r} is a {type(sub).__name__}; hrlp reads Box parts only")
                 width = int(np.prod(sub.shape))
                 parts.append((str(key), at, at + width))
+                starts[str(key)] = (at, width)
                 at += width
+            for name, where in (named or {}).items():
+                try:
+                    key, lo, hi = where
+                    start, width = starts[key]
+                except (KeyError, TypeError, ValueError):
+                    raise ValueError(f"observation part {name!r} must be (key, start, stop) inside one of the keys "
+                                     f"{', '.join(starts)}, got {where!r}") from None  # fmt: skip
+                if not 0 <= lo <= hi <= width:
+                    raise ValueError(f"observation part {name!r} spans [{lo}, {hi}) of {key!r}, which has {width} numbers")
+                parts.append((str(name), start + lo, start + hi))
             return cls(tuple(parts), at)
         if not isinstance(space, gym.spaces.Box):
             raise ValueError(f"observation space {space} is neither a Box nor a Dict of Boxes")
@@ -69,6 +84,12 @@ class ObsLayout:
         if not named:
             return cls(((WHOLE, 0, dim),), dim)
         return cls(tuple((str(k), *_bounds(s, dim)) for k, s in named.items()), dim)
+
+    @classmethod
+    def of_env(cls, env: gym.Env) -> ObsLayout:
+        """The layout of ``env``'s own observation (:func:`own_observation_space`) with the parts it names
+        (:func:`observation_parts`)."""
+        return cls.of_space(own_observation_space(env), observation_parts(env))
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -83,6 +104,41 @@ class ObsLayout:
         """How many numbers part ``name`` takes."""
         s = self.span(name)
         return s.stop - s.start
+
+
+#: Named parts of environments that do not name their own, by environment id (:func:`register_observation_parts`).
+_DECLARED: dict[str, Mapping[str, Any]] = {}
+
+
+def register_observation_parts(env_id: str, parts: Mapping[str, Any]) -> None:
+    """Name parts of the observation of the environments registered as ``env_id`` (a domain's declaration for an
+    environment it did not write, e.g. :mod:`hrlp.fetch` for Gymnasium-Robotics' Fetch tasks): ``name -> slice`` for a
+    Box observation, ``name -> (key, start, stop)`` inside a Dict's key (:meth:`ObsLayout.of_space`)."""
+    _DECLARED[env_id] = dict(parts)
+
+
+def observation_parts(env: gym.Env) -> Mapping[str, Any] | None:
+    """The parts ``env`` names: its own ``observation_parts`` attribute (the arm's), else those a domain declared for
+    its id (domains registered under the ``hrlp.domains`` entry point are imported first); None if neither."""
+    own = getattr(env.unwrapped, "observation_parts", None)
+    if own is not None:
+        return own
+    spec = env.spec or env.unwrapped.spec
+    if spec is None:
+        return None
+    load_domains()
+    return _DECLARED.get(spec.id)
+
+
+def own_observation_space(env: gym.Env) -> gym.Space:
+    """The environment's observation space before a wrapper flattened a Dict one (the first Dict space down its
+    wrappers), else its observation space."""
+    e: Any = env
+    while e is not None:
+        if isinstance(e.observation_space, gym.spaces.Dict):
+            return e.observation_space
+        e = getattr(e, "env", None)
+    return env.observation_space
 
 
 def _bounds(s: slice, dim: int) -> tuple[int, int]:
@@ -266,6 +322,88 @@ class ScriptedSkill(Skill):
 
     def done(self, obs: ObsView, params: np.ndarray) -> np.ndarray | None:
         return None if self._done is None else np.asarray(self._done(obs, params), dtype=bool).reshape(len(obs))
+
+
+class Holding(Skill):
+    """``skill`` with some entries of its action held at fixed values, e.g. a reaching policy trained where the gripper
+    was blocked, run with the gripper held open: ``Holding(reach, {3: 1.0}, "reach_open")``. Everything else (its
+    parameters, parts, duration, initiation and end) is ``skill``'s."""
+
+    def __init__(self, skill: Skill, held: Mapping[int, float], name: str | None = None) -> None:
+        if not held:
+            raise ValueError(f"skill {skill.name}: Holding needs at least one action entry to hold")
+        self.skill, self.name = skill, str(name or skill.name)
+        self.held = {int(i): float(v) for i, v in held.items()}
+        self.params, self.k, self.reads, self.chains, self.cost = skill.params, skill.k, skill.reads, skill.chains, skill.cost
+        self.has_done = bool(getattr(skill, "has_done", type(skill).done is not Skill.done))
+
+    def check(self, layout: ObsLayout, action_space: gym.spaces.Box, measured: Sequence[str] = ()) -> None:
+        self.skill.check(layout, action_space, measured)
+        a = int(np.prod(action_space.shape))
+        if bad := [i for i in self.held if not 0 <= i < a]:
+            raise ValueError(f"skill {self.name} holds action entries {bad}; this environment's action has {a} numbers")
+
+    def begin(self, obs: ObsView, params: np.ndarray) -> None:
+        self.skill.begin(obs, params)
+
+    def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
+        out = np.array(self.skill.act(obs, params), dtype=np.float64)
+        for i, v in self.held.items():
+            out[:, i] = v
+        return out
+
+    def initiable(self, obs: ObsView) -> np.ndarray | None:
+        return self.skill.initiable(obs)
+
+    def done(self, obs: ObsView, params: np.ndarray) -> np.ndarray | None:
+        return self.skill.done(obs, params)
+
+
+class _Shown(ObsView):
+    """An :class:`ObsView` in which some parts read as constants (:class:`Seeing`)."""
+
+    def __init__(self, view: ObsView, shown: Mapping[str, np.ndarray]) -> None:
+        super().__init__(view.flat, view.layout, view.idx, view._extra)
+        self._shown = shown
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name in self._shown:
+            return np.broadcast_to(self._shown[name], (len(self.flat), self._shown[name].size))
+        return super().__getitem__(name)
+
+    def rows(self, which: np.ndarray) -> ObsView:
+        return _Shown(super().rows(which), self._shown)
+
+
+class Seeing(Skill):
+    """``skill`` shown some observation parts as constants: a policy trained where a part never changed (FetchReach's
+    blocked fingers, ``gripper_state`` always 0) sees it as it was in training wherever it runs,
+    ``Seeing(reach, {"gripper_state": [0, 0]})``. The parts must exist in the environment (their width is checked)."""
+
+    def __init__(self, skill: Skill, shown: Mapping[str, Any], name: str | None = None) -> None:
+        self.skill, self.name = skill, str(name or skill.name)
+        self.shown = {str(p): np.asarray(v, dtype=np.float64).reshape(-1) for p, v in shown.items()}
+        self.params, self.k, self.reads, self.chains, self.cost = skill.params, skill.k, skill.reads, skill.chains, skill.cost
+        self.has_done = bool(getattr(skill, "has_done", type(skill).done is not Skill.done))
+
+    def check(self, layout: ObsLayout, action_space: gym.spaces.Box, measured: Sequence[str] = ()) -> None:
+        self.skill.check(layout, action_space, measured)
+        for part, value in self.shown.items():
+            if part in layout.names and layout.width(part) != value.size:
+                raise ValueError(f"skill {self.name} is shown {value.size} numbers as part {part!r}, which has "
+                                 f"{layout.width(part)}")  # fmt: skip
+
+    def begin(self, obs: ObsView, params: np.ndarray) -> None:
+        self.skill.begin(_Shown(obs, self.shown), params)
+
+    def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
+        return self.skill.act(_Shown(obs, self.shown), params)
+
+    def initiable(self, obs: ObsView) -> np.ndarray | None:
+        return self.skill.initiable(_Shown(obs, self.shown))
+
+    def done(self, obs: ObsView, params: np.ndarray) -> np.ndarray | None:
+        return self.skill.done(_Shown(obs, self.shown), params)
 
 
 class DirectControl(Skill):
@@ -471,12 +609,17 @@ __all__ = [
     "WHOLE",
     "DirectControl",
     "Hierarchy",
+    "Holding",
     "MacroStep",
     "ObsLayout",
     "ObsView",
     "ParamBox",
     "ScriptedSkill",
+    "Seeing",
     "Skill",
     "decide",
     "initiated",
+    "observation_parts",
+    "own_observation_space",
+    "register_observation_parts",
 ]

@@ -23,8 +23,6 @@ The library lives in ``$HRLP_SKILLS`` or ``~/.hrlp/skills``; each domain's shipp
 
 from __future__ import annotations
 
-import functools
-import importlib.metadata
 import math
 import os
 import re
@@ -45,10 +43,11 @@ from hrlp.checkpoint import (
     read_checkpoint,
     save_checkpoint,
 )
+from hrlp.domains import DOMAINS_GROUP, load_domains
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP, mlp
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.skills.core import ParamBox, Skill
-from hrlp.skills.policy import PolicySkill
+from hrlp.skills.policy import PolicySkill, check_bind
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 #: Bounds on a skill's files: a manifest is about 2 KB and 5 levels deep, the weights of a 64x64 skill 27 KB.
@@ -133,9 +132,6 @@ GAUSSIAN_ACTOR, SQUASHED_ACTOR = "gaussian", "squashed"
 UNNAMED_FORMAT = "arm"
 _FORMATS: dict[str, SkillFormat] = {}
 _SHIPPED: list[Path] = []
-#: The entry-point group through which a domain package (``hrlp.arm``) registers its skill formats and shipped skills
-#: (:func:`register_format`, :func:`register_shipped`) without this module importing it.
-DOMAINS_GROUP = "hrlp.domains"
 
 
 def register_format(name: str, fmt: SkillFormat) -> None:
@@ -149,21 +145,14 @@ def register_shipped(root: Path) -> None:
         _SHIPPED.append(root)
 
 
-@functools.cache
-def _load_domains() -> None:
-    """Import every package registered under :data:`DOMAINS_GROUP` once, so that they register their formats."""
-    for point in importlib.metadata.entry_points(group=DOMAINS_GROUP):
-        point.load()
-
-
 def shipped_roots() -> list[Path]:
     """The shipped skills of every domain, in the order they registered."""
-    _load_domains()
+    load_domains()
     return list(_SHIPPED)
 
 
 def _format(m: dict[str, Any]) -> SkillFormat:
-    _load_domains()
+    load_domains()
     name = m.get("format", UNNAMED_FORMAT)
     if name not in _FORMATS:
         raise SkillProblem(f"skill file of unknown format {_short(name)} (known: {', '.join(sorted(_FORMATS))})")
@@ -211,10 +200,17 @@ def _check_policy_manifest(m: dict[str, Any]) -> tuple[ParamBox, int, tuple[int,
     if any(lo > hi for lo, hi in zip(m["action_low"], m["action_high"], strict=True)):
         raise SkillProblem("manifest's action_low exceeds its action_high")
     done = m.get("done")
-    if done is not None and (not isinstance(done, dict) or done.get("part") not in names
+    if done is not None and (not isinstance(done, dict) or not isinstance(done.get("part"), str) or not done["part"]
                              or not (_number(done.get("within")) and 0 < done["within"] < math.inf)):  # fmt: skip
-        raise SkillProblem(f"manifest's 'done' must be {{part: one of its parts, within: a positive distance}}, got "
+        raise SkillProblem(f"manifest's 'done' must be {{part: a part name, within: a positive distance}}, got "
                             f"{_short(done)}")  # fmt: skip
+    bind = m.get("bind")
+    if bind is not None and not (isinstance(bind, dict) and all(isinstance(v, list) for v in bind.values())):
+        raise SkillProblem(f"manifest's 'bind' must map its parts to lists of part names, got {_short(bind)}")
+    try:
+        check_bind(bind, names, param_part, "file")
+    except ValueError as e:
+        raise SkillProblem(f"manifest's 'bind': {str(e).removeprefix('skill file: ')}") from None
     if m.get("actor", GAUSSIAN_ACTOR) not in (GAUSSIAN_ACTOR, SQUASHED_ACTOR):
         raise SkillProblem(f"manifest's 'actor' must be {GAUSSIAN_ACTOR} or {SQUASHED_ACTOR}, got {_short(m.get('actor'))}")
     hidden = _check_network(m, obs_dim)
@@ -421,7 +417,7 @@ def _build_policy(name: str, tensors: dict[str, torch.Tensor], m: dict[str, Any]
 
     done = m.get("done") or {}
     skill = PolicySkill(name, [tuple(p) for p in m["parts"]], m.get("param_part"), box, act, low, high, k=k,
-                        done_part=done.get("part"), done_within=done.get("within"))  # fmt: skip
+                        done_part=done.get("part"), done_within=done.get("within"), bind=m.get("bind"))  # fmt: skip
     skill.content_hash = sha256
     return skill
 

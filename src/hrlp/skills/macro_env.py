@@ -32,7 +32,18 @@ import numpy as np
 from hrlp.config import MicroAction
 from hrlp.envs.faults import EnvError, raised_in, reset_env, step_env
 from hrlp.envs.vector import NO_SUCCESS_TEST, VectorStep, check_num_envs, info_arrays, info_success, physics_seconds
-from hrlp.skills.core import DirectControl, Hierarchy, MacroStep, ObsLayout, ObsView, ParamBox, Skill, decide, initiated
+from hrlp.skills.core import (
+    DirectControl,
+    Hierarchy,
+    MacroStep,
+    ObsLayout,
+    ObsView,
+    ParamBox,
+    Skill,
+    decide,
+    initiated,
+    observation_parts,
+)
 
 
 class MacroEnv(gym.Env):
@@ -71,7 +82,7 @@ class MacroEnv(gym.Env):
         self.env, self.skills, self.micro, self.gamma = env, list(skills), micro, float(gamma)
         space = env.observation_space
         self._dict = isinstance(space, gym.spaces.Dict)
-        layout = ObsLayout.of_space(space, getattr(env.unwrapped, "observation_parts", None))
+        layout = ObsLayout.of_space(space, observation_parts(env))
         entries: list[Skill] = list(self.skills)
         if micro:
             entries.append(DirectControl(env.action_space, micro.duration, micro.penalty, micro.max_torque))

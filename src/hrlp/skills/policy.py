@@ -9,7 +9,7 @@ parameter replaces set to the Manager's parameters. The same class serves a poli
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import gymnasium as gym
@@ -32,11 +32,16 @@ class PolicySkill(Skill):
         k: its default duration.
         done_part, done_within: the skill ends (a success end) once part ``done_part`` (e.g. ``achieved_goal``) is
             within ``done_within`` of its parameters (Euclidean); None: it runs its ``k`` steps.
+        bind: where it reads its own parts in the environment it runs in, when they go by other names there: ``own
+            part -> the environment's parts``, concatenated in order (e.g. a policy trained on FetchReach, whose
+            ``achieved_goal`` is the gripper's position, runs on FetchPickAndPlace with ``{"achieved_goal":
+            ("grip_pos",)}``). Unbound parts are read by their own name; the parameter part is never read.
     """
 
     def __init__(self, name: str, parts: Sequence[tuple[str, int]], param_part: str | None, params: ParamBox,
                  policy: Callable[[np.ndarray], np.ndarray], action_low: np.ndarray, action_high: np.ndarray, *,
-                 k: int = 10, done_part: str | None = None, done_within: float | None = None) -> None:  # fmt: skip
+                 k: int = 10, done_part: str | None = None, done_within: float | None = None,
+                 bind: Mapping[str, Sequence[str]] | None = None) -> None:  # fmt: skip
         self.name, self.k, self.params = str(name), _positive(k, name), params
         self.parts = tuple((str(p), int(w)) for p, w in parts)
         names = [p for p, _ in self.parts]
@@ -56,14 +61,21 @@ class PolicySkill(Skill):
         self.action_high = np.asarray(action_high, dtype=np.float64).reshape(-1)
         self.done_part, self.done_within = done_part, done_within
         self.has_done = done_part is not None
-        self.reads = tuple(p for p in names if p != param_part) + ((done_part,) if done_part else ())
+        self.bind = check_bind(bind, names, param_part, self.name)
+        self.sources = {p: self.bind.get(p, (p,)) for p in names if p != param_part}
+        read = [q for p in names if p != param_part for q in self.sources[p]] + ([done_part] if done_part else [])
+        self.reads = tuple(dict.fromkeys(read))
 
     def check(self, layout: ObsLayout, action_space: gym.spaces.Box, measured: Sequence[str] = ()) -> None:
         super().check(layout, action_space, measured)
+        widths = dict(zip(layout.names, (layout.width(n) for n in layout.names), strict=True))
         for part, width in self.parts:
-            if part != self.param_part and layout.width(part) != width:
-                raise ValueError(f"skill {self.name} reads {width} numbers of part {part!r}; this environment has "
-                                 f"{layout.width(part)}")  # fmt: skip
+            if part == self.param_part:
+                continue
+            src = self.sources[part]
+            if (got := sum(widths.get(q, 0) for q in src)) != width:
+                where = f"part {part!r}" if src == (part,) else f"part {part!r} (bound to {'+'.join(src)})"
+                raise ValueError(f"skill {self.name} reads {width} numbers of {where}; this environment has {got}")
         if self.done_part and layout.width(self.done_part) != self.params.dim:
             raise ValueError(f"skill {self.name} ends when part {self.done_part!r} reaches its parameters, but that part "
                              f"has {layout.width(self.done_part)} numbers and its parameters {self.params.dim}")  # fmt: skip
@@ -73,7 +85,8 @@ class PolicySkill(Skill):
 
     def observation(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
         """The skill's own input: its parts in order, its parameter part replaced by ``params``. ``[M, obs_dim]``"""
-        cols = [np.asarray(params, dtype=np.float64) if p == self.param_part else obs[p] for p, _ in self.parts]
+        cols = [np.asarray(params, dtype=np.float64) if p == self.param_part else _read(obs, self.sources[p])
+                for p, _ in self.parts]  # fmt: skip
         return np.concatenate(cols, axis=1) if cols else np.zeros((len(obs), 0))
 
     def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
@@ -89,14 +102,47 @@ class PolicySkill(Skill):
         return np.linalg.norm(obs[self.done_part] - params, axis=1) <= self.done_within  # type: ignore[operator]
 
 
+def _read(obs: ObsView, names: tuple[str, ...]) -> np.ndarray:
+    return obs[names[0]] if len(names) == 1 else np.concatenate([obs[n] for n in names], axis=1)
+
+
+def check_bind(bind: Mapping[str, Sequence[str]] | None, parts: Sequence[str], param_part: str | None,
+               who: str) -> dict[str, tuple[str, ...]]:  # fmt: skip
+    """``bind`` (own part -> the environment's parts) checked against a policy's own ``parts``: every key one of its
+    parts other than ``param_part``, every value a non-empty list of part names; a one-line ValueError naming ``who``."""
+    out: dict[str, tuple[str, ...]] = {}
+    for own, src in (bind or {}).items():
+        if own not in parts or own == param_part:
+            raise ValueError(f"skill {who}: bind names {own!r}, which is not one of the parts it reads "
+                             f"({', '.join(p for p in parts if p != param_part)})")  # fmt: skip
+        names = (src,) if isinstance(src, str) else tuple(src) if isinstance(src, Sequence) else ()
+        if not names or not all(isinstance(n, str) and n for n in names):
+            raise ValueError(f"skill {who}: bind's {own!r} must name one or more observation parts, got {src!r}")
+        out[str(own)] = names
+    return out
+
+
+def parse_bind(items: Sequence[str]) -> dict[str, tuple[str, ...]]:
+    """``["achieved_goal=grip_pos", "observation=grip_pos,gripper_state"]`` -> a ``bind`` mapping; a one-line
+    ValueError for an item without ``=``."""
+    out: dict[str, tuple[str, ...]] = {}
+    for item in items:
+        own, eq, src = item.partition("=")
+        if not eq or not own.strip() or not src.strip():
+            raise ValueError(f"--bind {item!r}: write OWN_PART=PART[,PART...], e.g. achieved_goal=grip_pos")
+        out[own.strip()] = tuple(n.strip() for n in src.split(","))
+    return out
+
+
 def from_sb3(path: str | Path, name: str | None = None, *, param: str | None = "desired_goal", low: object = None,
-             high: object = None, k: int = 10, done_part: str | None = None,
-             done_within: float | None = None) -> PolicySkill:  # fmt: skip
+             high: object = None, k: int = 10, done_part: str | None = None, done_within: float | None = None,
+             bind: Mapping[str, Sequence[str]] | None = None) -> PolicySkill:  # fmt: skip
     """A skill from a Stable-Baselines3 PPO, SAC or TD3 ``.zip`` (read without unpickling, :mod:`hrlp.skills.sb3`).
 
     ``param`` names the observation part its parameters replace (for a policy trained on a Dict observation; default
     ``desired_goal``, None for none); ``low``/``high`` bound the parameters in the user's units (required for a
-    parameter part). A policy trained on a Box observation reads the part ``observation`` of its new environment."""
+    parameter part); ``bind`` reads its parts under the names they have where it runs (:class:`PolicySkill`). A policy
+    trained on a Box observation reads the part ``observation`` of its new environment."""
     p = load_sb3(path)
     skill_name = name or Path(path).stem
     parts = p.obs_parts
@@ -108,7 +154,7 @@ def from_sb3(path: str | Path, name: str | None = None, *, param: str | None = "
     width = dict(parts).get(param, 0) if param else 0
     box = param_box(low, high, width, None, f"{path}")  # an SB3 file records a Dict's bounds only as text: not read
     return PolicySkill(skill_name, parts, param, box, p.act, p.action_low, p.action_high, k=k, done_part=done_part,
-                       done_within=done_within)  # fmt: skip
+                       done_within=done_within, bind=bind)  # fmt: skip
 
 
 def param_box(low: object, high: object, width: int, recorded: tuple[np.ndarray, np.ndarray] | None, who: str) -> ParamBox:

@@ -5,7 +5,7 @@ skill's weights as a run's starting point (:func:`warm_start`).
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,7 +30,7 @@ from hrlp.rollout import (
     build_vector_env,
     mean_or_nan,
 )
-from hrlp.skills.core import ObsLayout, ParamBox
+from hrlp.skills.core import ObsLayout, ParamBox, own_observation_space
 from hrlp.skills.library import GAUSSIAN_ACTOR, SQUASHED_ACTOR
 from hrlp.skills.macro_env import MacroEnv
 from hrlp.skills.policy import PolicySkill, param_box
@@ -203,14 +203,15 @@ def load_policy(directory: Path) -> tuple[Policy, RunningNormalizer, dict[str, A
 
 
 def from_run(run_dir: str | Path, name: str | None = None, *, param: str | None = "desired_goal", low: object = None,
-             high: object = None, k: int = 10, done_part: str | None = None,
-             done_within: float | None = None) -> PolicySkill:  # fmt: skip
+             high: object = None, k: int = 10, done_part: str | None = None, done_within: float | None = None,
+             bind: Mapping[str, Sequence[str]] | None = None) -> PolicySkill:  # fmt: skip
     """A skill from a flat run hrlp trained on any Gymnasium environment (its checkpoint: safetensors + JSON).
 
     ``param`` names the part of the run's Dict observation its parameters replace (default ``desired_goal``; None
     for none, and for a run on a Box observation, which reads the part ``observation``); ``low``/``high`` bound them
-    (default: that part's bounds in the run's environment, when finite); ``done_part``/``done_within`` end it early
-    (:class:`~hrlp.skills.policy.PolicySkill`). :func:`policy_skill_files` writes the same skill into a library."""
+    (default: that part's bounds in the run's environment, when finite); ``done_part``/``done_within`` end it early;
+    ``bind`` reads its parts under the names they have where it runs (:class:`~hrlp.skills.policy.PolicySkill`).
+    :func:`policy_skill_files` writes the same skill into a library."""
     run = Path(run_dir)
     trained, parts, param, box, action_space = _run_skill(run, param, low, high)
 
@@ -218,12 +219,13 @@ def from_run(run_dir: str | Path, name: str | None = None, *, param: str | None 
         return trained.act_rows(x, None, True)
 
     return PolicySkill(name or run.name, parts, param, box, policy, action_space.low, action_space.high, k=k,
-                       done_part=done_part, done_within=done_within)  # fmt: skip
+                       done_part=done_part, done_within=done_within, bind=bind)  # fmt: skip
 
 
 def policy_skill_files(run_dir: str | Path, *, param: str | None = "desired_goal", low: object = None, high: object = None,
-                       k: int = 10, done_part: str | None = None,
-                       done_within: float | None = None) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:  # fmt: skip
+                       k: int = 10, done_part: str | None = None, done_within: float | None = None,
+                       bind: Mapping[str, Sequence[str]] | None = None,
+                       ) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:  # fmt: skip
     """The tensors and manifest of :func:`from_run`'s skill as a library file (``hrlp skills add RUN --param ...``;
     :meth:`hrlp.skills.library.SkillLibrary.save` writes them): the run's policy and frozen normaliser, the observation
     parts it reads, its parameter part and box, its action bounds and its early end. Raises a one-line ValueError for a
@@ -231,7 +233,7 @@ def policy_skill_files(run_dir: str | Path, *, param: str | None = "desired_goal
     run = Path(run_dir)
     trained, parts, param, box, action_space = _run_skill(run, param, low, high)
     squashed = isinstance(trained.policy, SACActor)
-    checked = dict(k=k, done_part=done_part, done_within=done_within)  # PolicySkill checks them
+    checked = dict(k=k, done_part=done_part, done_within=done_within, bind=bind)  # PolicySkill checks them
     skill = PolicySkill(run.name, parts, param, box, lambda x: x, action_space.low, action_space.high, **checked)  # type: ignore[arg-type]
     tensors, meta, cfg = read_run_checkpoint(run / "checkpoint")
     kept = {key: v for key, v in tensors.items() if key.startswith(("policy.", "normalizer."))}
@@ -242,6 +244,7 @@ def policy_skill_files(run_dir: str | Path, *, param: str | None = "desired_goal
         "param_part": param,
         "param": box.to_json(),
         "done": None if done_part is None else {"part": done_part, "within": float(done_within)},  # type: ignore[arg-type]
+        "bind": {own: list(src) for own, src in skill.bind.items()},
         "action_low": [float(v) for v in np.asarray(action_space.low, np.float64).reshape(-1)],
         "action_high": [float(v) for v in np.asarray(action_space.high, np.float64).reshape(-1)],
         "obs_dim": int(meta["obs_dim"]),
@@ -263,11 +266,11 @@ def _run_skill(run: Path, param: str | None, low: object, high: object) -> _RunS
     if trained.config.macro is not None:
         raise ValueError(f"{run}: a skill is a flat policy; this run trained a Manager")
     env = trained.make_env()
-    space, action_space = _own_observation_space(env), env.action_space
+    space, action_space = own_observation_space(env), env.action_space
     env.close()
     if not isinstance(action_space, gym.spaces.Box):
         raise ValueError(f"{run}: a skill emits Box actions; this run's action space is {action_space}")
-    layout = ObsLayout.of_space(space)
+    layout = ObsLayout.of_space(space)  # the row its policy reads: the keys, without parts named inside them
     parts = [(n, layout.width(n)) for n in layout.names]
     if param is not None and param not in layout.names:
         if isinstance(space, gym.spaces.Dict):
@@ -280,13 +283,3 @@ def _run_skill(run: Path, param: str | None, low: object, high: object) -> _RunS
         recorded = (np.asarray(sub.low, np.float64).reshape(-1), np.asarray(sub.high, np.float64).reshape(-1))
     box = param_box(low, high, layout.width(param) if param else 0, recorded, str(run))
     return trained, parts, param, box, action_space
-
-
-def _own_observation_space(env: gym.Env) -> gym.Space:
-    """The environment's observation space before hrlp flattened a Dict one (the first Dict space down its wrappers)."""
-    e: gym.Env | None = env
-    while e is not None:
-        if isinstance(e.observation_space, gym.spaces.Dict):
-            return e.observation_space
-        e = getattr(e, "env", None)
-    return env.observation_space
