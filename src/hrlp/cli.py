@@ -1535,8 +1535,11 @@ def skills_build(
     ] = None,
     workers: Annotated[int, typer.Option(help="Runs at once.", callback=check.workers())] = 2,
     overwrite: Annotated[bool, typer.Option(help="Replace skills of the same names in the library.")] = False,
+    preset: Annotated[
+        str, typer.Option(help="The recipes: shipped-skills (the arm's) or fetch-skills (Fetch's; needs hrlp[fetch]).")
+    ] = "shipped-skills",
 ) -> None:
-    """Train the shipped skills from their recipes (the 'shipped-skills' preset) and add them to LIBRARY."""
+    """Train shipped skills from their recipes (--preset; default the arm's, 'shipped-skills') and add them to LIBRARY."""
     from dataclasses import replace
 
     from hrlp.arm.skill_files import add_run
@@ -1545,23 +1548,31 @@ def skills_build(
     from hrlp.experiments.runner import plan
     from hrlp.experiments.runner import reproduce as run_grid
     from hrlp.skills import SkillLibrary
+    from hrlp.training.loading import policy_skill_files
 
-    preset = PRESETS["shipped-skills"]
+    recipes = [name for name, p in PRESETS.items() if all(r.skill for r in p.runs)]
+    if preset not in recipes:
+        raise _fail(f"--preset {preset!r} is not a skill recipe (recipes: {', '.join(recipes)})")
+    chosen = PRESETS[preset]
     names = [s.strip() for s in only.split(",") if s.strip()]
-    known = [r.name for r in preset.runs]
+    known = [r.name for r in chosen.runs]
     try:
         if unknown := sorted(set(names) - set(known)):
             raise ValueError(f"--only: no recipe for {', '.join(unknown)} (recipes: {', '.join(known)})")
-        preset = replace(preset, runs=tuple(r for r in preset.runs if not names or r.name in names))
+        chosen = replace(chosen, runs=tuple(r for r in chosen.runs if not names or r.name in names))
         lib = SkillLibrary(library)
-        if not overwrite and (taken := [r.skill[0] for r in preset.runs if r.skill and r.skill[0] in lib.names()]):
+        if not overwrite and (taken := [r.skill[0] for r in chosen.runs if r.skill and r.skill[0] in lib.names()]):
             raise ValueError(f"{library} already has {', '.join(taken)}; pass --overwrite to replace them")
-        run_grid(preset, out, None, budget, "process", workers, None, reuse=False)
+        run_grid(chosen, out, None, budget, "process", workers, None, reuse=False)
         if budget is not None:
-            preset = preset.with_budget(budget)
-        for job, run in zip(plan(preset, out), preset.runs, strict=True):
+            chosen = chosen.with_budget(budget)
+        for job, run in zip(plan(chosen, out), chosen.runs, strict=True):
             assert run.skill is not None
-            add_run(lib, job.run_dir, run.skill[0], k=run.skill[1], overwrite=overwrite)
+            if run.skill_args is None:  # the arm's: the task declares the parameters
+                add_run(lib, job.run_dir, run.skill[0], k=run.skill[1], overwrite=overwrite)
+            else:
+                tensors, manifest = policy_skill_files(job.run_dir, k=run.skill[1], **run.skill_args)
+                lib.save(run.skill[0], tensors, manifest, overwrite=overwrite)
             console.print(f"skill {run.skill[0]!r} (k = {run.skill[1]}) from {job.run_dir} added to {library}")
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None

@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 from hrlp.arm.research.imitate import ImitationConfig
 from hrlp.config import PAPER_SETTINGS, Handover, MacroSpec, MicroAction, with_settings
+from hrlp.fetch import REACH_BIND
 from hrlp.train import TrainConfig
 
 #: The shipped Gripper skill's start set (its recipe: the ``shipped-skills`` preset).
@@ -45,6 +48,9 @@ class Run:
     seed_offset: int = 0
     """Added to each of the preset's seeds for this run (its directory keeps the preset's seed): a recipe whose skill
     was trained with a seed other than the preset's, rebuilt with that seed."""
+    skill_args: Mapping[str, Any] | None = None
+    """For a skill trained on an environment outside the arm: the settings of ``hrlp skills add`` that make the run a
+    library skill (``param``, ``low``, ``high``, ``done_part``, ``done_within``, ``bind``; ``hrlp skills build``)."""
 
 
 @dataclass(frozen=True)
@@ -366,10 +372,45 @@ def _shipped_skills() -> Preset:
     )  # fmt: skip
 
 
+#: Gymnasium-Robotics' Fetch tasks, as hrlp names them (``pip install "hrlp[fetch]"``).
+FETCH = "gymnasium_robotics:Fetch{}-v4"
+#: Where the Fetch skills' points lie (:data:`hrlp.fetch.skills.WORKSPACE_LOW` / ``_HIGH``).
+_FETCH_WORKSPACE = ((1.05, 0.45, 0.40), (1.65, 1.05, 0.90))
+#: The Fetch Managers' skills, per task (:mod:`hrlp.fetch.skills`).
+FETCH_SKILLS = {
+    "PickAndPlace": ("hrlp.fetch.skills:reach", "hrlp.fetch.skills:grasp", "hrlp.fetch.skills:carry"),
+    "Push": ("hrlp.fetch.skills:push",),
+    "Slide": ("hrlp.fetch.skills:strike",),
+}
+
+
+def _fetch_sac(task: str, **kw: Any) -> TrainConfig:
+    """SAC on a Fetch task: 4 environments, 500 decisions (a flat run: 2,000 steps) per iteration; ``kw`` on top."""
+    return TrainConfig(**{"task": FETCH.format(task), "algo": "sac", "num_envs": 4, "batch_steps": 500, "workers": 1, **kw})
+
+
+def _fetch_presets() -> tuple[Preset, ...]:
+    """The Fetch skills' recipe and the Managers on FetchPickAndPlace, FetchPush and FetchSlide (docs/fetch.md)."""
+    low, high = _FETCH_WORKSPACE
+    reach = Run("fetch-reach", _fetch_sac("Reach", batch_steps=10_000), steps=10_000, skill=("fetch-reach", 10),
+                skill_args={"param": "desired_goal", "low": low, "high": high, "done_part": "grip_pos", "done_within": 0.02,
+                            "bind": REACH_BIND})  # fmt: skip
+    managers = tuple(Run(f"manager-{task}", _fetch_sac(task, macro=MacroSpec(sk))) for task, sk in FETCH_SKILLS.items())
+    return (
+        Preset("fetch-skills", "the Fetch skill hrlp trains: reach (SAC + HER on FetchReach-v4; the goal is its parameter, "
+               "read on the other Fetch tasks through the parts hrlp.fetch names)", "hrlp's own (docs/fetch.md)",
+               (reach,), seeds=(0,), budget=10_000, eval_episodes=100),
+        Preset("fetch", "Managers over the Fetch skills (hrlp.fetch.skills) on FetchPickAndPlace, FetchPush and FetchSlide, "
+               "SAC + HER, the tasks' own sparse reward and success test", "hrlp's own (docs/fetch.md)",
+               managers, budget=100_000, eval_episodes=100),
+    )  # fmt: skip
+
+
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
         _shipped_skills(),
+        *_fetch_presets(),
         Preset(
             "gripper-grid",
             "Gripper over the reward grid c2 x tr of Figure 6, the paper's start set widened to close, open-claw starts "
