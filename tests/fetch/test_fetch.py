@@ -24,7 +24,7 @@ if tuple(int(v) for v in mujoco.__version__.split(".")[:2]) >= (3, 12):
     pytest.skip(f"Gymnasium-Robotics' Fetch fails at reset on mujoco {mujoco.__version__} (>= 3.12); "
                 'pip install "hrlp[fetch]" installs one it runs on', allow_module_level=True)  # fmt: skip
 
-from hrlp.fetch import skills as fs  # noqa: E402 (after the skip: it loads the shipped skills' files only when asked)
+from hrlp.fetch import skills as fs
 
 PICK = "gymnasium_robotics:FetchPickAndPlace-v4"
 
