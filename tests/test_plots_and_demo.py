@@ -60,12 +60,14 @@ def test_demo_trains_evaluates_and_writes_video_and_plot(tmp_path):
 def test_demo_cli_defaults_are_the_demos_own():
     """The CLI keeps its defaults literal (so that ``hrlp --help`` need not import torch); they must match the demo's."""
     import inspect
+    import typing
 
     from hrlp.cli import demo
-    from hrlp.experiments.demo import DEMO_STEPS, demo_config
+    from hrlp.experiments.demo import DEMO_STEPS, FETCH_DEMO_STEPS, demo_config
 
     params = inspect.signature(demo).parameters
-    assert params["steps"].default == DEMO_STEPS
+    said = typing.get_type_hints(demo, include_extras=True)["steps"].__metadata__[0].help  # each robot's default budget
+    assert f"arm {DEMO_STEPS:,}" in said and f"fetch {FETCH_DEMO_STEPS:,}" in said
     config_defaults = inspect.signature(demo_config).parameters
     assert params["seed"].default == config_defaults["seed"].default
     assert params["workers"].default == config_defaults["workers"].default

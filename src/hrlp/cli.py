@@ -250,25 +250,38 @@ def demo(
         "runs/demo"
     ),
     steps: Annotated[
-        int, typer.Option(help="Low-level environment steps of Manager training.", callback=_STEPS_CHECK)
-    ] = 1_000_000,
+        int | None,
+        typer.Option(
+            help="Low-level environment steps of Manager training (default: arm 1,000,000; fetch 60,000).",
+            callback=_STEPS_CHECK,
+        ),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the run.", callback=check.seed())] = 0,
     episodes: Annotated[int, typer.Option(help="Evaluation episodes for the success rate.", callback=_EPISODES_CHECK)] = 100,
     video_steps: Annotated[
         int, typer.Option(help="Low-level steps in the video (default: one episode).", callback=_VIDEO_STEPS_CHECK)
     ] = 0,
     workers: Annotated[
-        int, typer.Option(help="Sampling processes (1: sample in this process).", callback=check.workers())
+        int,
+        typer.Option(help="Sampling processes (1: sample in this process; the arm's demo only).", callback=check.workers()),
     ] = 2,
+    robot: Annotated[
+        str,
+        typer.Option(
+            help="arm: reach-and-grip on hrlp's arm; fetch: FetchPickAndPlace (needs hrlp[fetch]).",
+            callback=check.choice(("arm", "fetch")),
+        ),
+    ] = "arm",
 ) -> None:
-    """Train a Manager on reach-and-grip with the shipped skills; print its success rate, write a video and a plot."""
+    """Train a Manager with shipped skills (reach-and-grip on the arm, or pick-and-place on Fetch); print its success
+    rate, write a video labelled with the active skill and a learning-curve plot."""
     from hrlp.video import check_rendering
 
     check_rendering(480, 360)  # the video comes after minutes of training: a missing OpenGL driver fails now
     from hrlp.experiments.demo import run_demo
 
     with describing(lambda: f"; the same command continues the run in {out_dir} from its last checkpoint"):
-        res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers)
+        res = run_demo(out_dir, steps, seed, episodes, video_steps, err_console, workers, robot)
     console.print(f"success rate: {res.success}")
     console.print(f"video: {res.video}\nlearning curve: {res.plot}\nrun: {res.run_dir} (hrlp eval / hrlp render work on it)")
 

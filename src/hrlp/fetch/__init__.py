@@ -36,8 +36,26 @@ TASKS = {f"Fetch{task}{reward}-v4": parts for task, parts in (("Reach", REACH_PA
 #: FetchReach's own observation parts expressed in the other tasks' named parts (``--bind`` of a skill trained there).
 REACH_BIND = {"achieved_goal": ("grip_pos",), "observation": ("grip_pos", "gripper_state", "grip_velp", "gripper_vel")}
 
+#: The first MuJoCo release on which Gymnasium-Robotics 1.4.2's Fetch fails at reset (an assertion on a joint's type).
+FIRST_FAILING_MUJOCO = (3, 12)
+
+
+def check_installed() -> None:
+    """Raise a one-line ValueError unless Gymnasium-Robotics is installed with a MuJoCo its Fetch runs on."""
+    import importlib.metadata
+
+    try:
+        importlib.metadata.version("gymnasium-robotics")
+    except importlib.metadata.PackageNotFoundError:
+        raise ValueError('Fetch needs Gymnasium-Robotics: pip install "hrlp[fetch]"') from None
+    mujoco = importlib.metadata.version("mujoco")
+    if tuple(int(v) for v in mujoco.split(".")[:2]) >= FIRST_FAILING_MUJOCO:
+        raise ValueError(f"Gymnasium-Robotics' Fetch fails at reset on mujoco {mujoco} (from 3.12 on): "
+                         'pip install "hrlp[fetch]" installs one it runs on (3.11)')  # fmt: skip
+
+
 for _task, _parts in TASKS.items():
     register_observation_parts(_task, {name: ("observation", lo, hi) for name, (lo, hi) in _parts.items()})
 register_shipped(Path(__file__).parent / "pretrained")  # fetch-reach (hrlp); the carry skill's SB3 .zip is read by path
 
-__all__ = ["OBJECT_PARTS", "REACH_BIND", "REACH_PARTS", "TASKS"]
+__all__ = ["FIRST_FAILING_MUJOCO", "OBJECT_PARTS", "REACH_BIND", "REACH_PARTS", "TASKS", "check_installed"]

@@ -41,7 +41,7 @@ OPEN, CLOSED = 1.0, -1.0
 #: How high above the object's centre the closed fingers push it (m), and at most how fast (action units).
 PUSH_HEIGHT, PUSH_SPEED = 0.0, 0.3
 #: What FetchReach's blocked fingers always read: its policies see them so wherever they run (:class:`Seeing`); shown
-#: the fingers as they are (open, 0.05 m each), hrlp's reach stopped 9 to 11 cm from its points instead of 0.2 to 1.1 cm.
+#: the fingers as they are (open, 0.05 m each), hrlp's reach stopped 8.5 to 10.9 cm from its points instead of 0.2 to 1.1 cm.
 BLOCKED_FINGERS = {"gripper_state": (0.0, 0.0), "gripper_vel": (0.0, 0.0)}
 #: The shipped Stable-Baselines3 file of the ``carry`` skill.
 SB3_REACH = "fetch-reach-sb3.zip"
