@@ -43,3 +43,35 @@ def test_presets_and_skills_read_at_80_columns_one_line_each(monkeypatch):
     assert r.exit_code == 0 and "gripper+reacher,c2=3,tr=0.03" in r.output and "hrlp reproduce reach-and-grip-1" in r.output
     bad = CliRunner().invoke(app, ["presets", "nope"])
     assert bad.exit_code != 0 and "no preset 'nope'" in bad.output and "Traceback" not in bad.output
+
+
+def test_skills_build_names_its_recipes_and_refuses_another_preset_in_one_line(tmp_path):
+    r = CliRunner().invoke(app, ["skills", "build", "--library", str(tmp_path / "lib"), "--preset", "fetch"])
+    assert r.exit_code != 0 and "--preset 'fetch' is not a skill recipe (recipes: shipped-skills, fetch-skills)" in r.output
+    r = CliRunner().invoke(app, ["skills", "build", "--library", str(tmp_path / "lib"), "--preset", "fetch-skills",
+                                 "--only", "nothing"])  # fmt: skip
+    assert r.exit_code != 0 and "--only: no recipe for nothing (recipes: fetch-reach)" in r.output
+
+
+def test_the_fetch_stack_check_names_what_is_missing_or_too_new(monkeypatch):
+    import importlib.metadata
+
+    import pytest
+
+    from hrlp.fetch import check_installed
+
+    real = importlib.metadata.version
+
+    def version(name: str, mujoco: str, robotics: bool) -> str:
+        if name == "gymnasium-robotics" and not robotics:
+            raise importlib.metadata.PackageNotFoundError(name)
+        return mujoco if name == "mujoco" else real(name) if name != "gymnasium-robotics" else "1.4.2"
+
+    for mujoco, robotics, message in (("3.11.0", False, 'Fetch needs Gymnasium-Robotics: pip install "hrlp\\[fetch\\]"'),
+                                      ("3.12.0", True, "fails at reset on mujoco 3.12.0 \\(from 3.12 on\\)"),
+                                      ("4.0.1", True, "fails at reset on mujoco 4.0.1")):  # fmt: skip
+        monkeypatch.setattr(importlib.metadata, "version", lambda n, m=mujoco, r=robotics: version(n, m, r))
+        with pytest.raises(ValueError, match=message):
+            check_installed()
+    monkeypatch.setattr(importlib.metadata, "version", lambda n: version(n, "3.11.0", True))
+    check_installed()
