@@ -100,3 +100,11 @@ def test_a_warning_handler_installed_by_someone_else_is_left_in_place(monkeypatc
     finally:
         mujoco.set_mju_user_warning(previous)
     assert mjcompat.route_warnings()
+
+
+def test_the_probes_give_the_rules_measured_at_both_ends_of_the_supported_range():
+    version = tuple(int(x) for x in mujoco.__version__.split(".")[:2])
+    if (3, 3) < version < (3, 11):
+        pytest.skip(f"MuJoCo {mujoco.__version__}: measured on 3.3.7, 3.11.0 and 4.0.1 only")
+    expected = ("max", False) if version == (3, 3) else ("sum", True)
+    assert (mjcompat.contact_margin_rule(), mjcompat.free_body_spin_as_4_0()) == expected

@@ -6,6 +6,10 @@ What differs, measured on 3.3.7, 3.11.0 and 4.0.1 (docs/reliability.md, "MuJoCo 
 - The contact margin of a geom pair is the *sum* of the two geoms' margins on 3.11 and 4.0, their *maximum* on 3.3
   (the arm's capsule rests 1 mm lower on 3.3, and the shipped skills, trained under the sum, miss their marks):
   :func:`sum_contact_margins` makes every version compute the sum.
+- A free body spinning about an axis that is not one of its principal axes: 3.11 and 4.0 update its angular velocity by
+  other than ``h * qacc`` (the 3.11 changelog replaced the midpoint integration of free bodies), 3.3 by exactly that.
+  There is no option to choose, so trajectories in which the capsule spins (pushed by a finger) part after the first
+  such step; :func:`free_body_spin_as_4_0` says which rule this MuJoCo has, for the tests that replay recorded ones.
 - ``Renderer.__del__`` of 3.3 reads an OpenGL context that a failed ``__init__`` never made (a second traceback at
   exit): :func:`open_renderer`.
 - MuJoCo's own warnings ("Nan, Inf or huge value in QACC at DOF 13. The simulation is unstable.") are printed to
@@ -99,6 +103,28 @@ def sum_contact_margins(model: mujoco.MjModel) -> mujoco.MjModel:
         )
     model.geom_margin[colliding] *= 2
     return model
+
+
+# A 2:1:0.4 box spinning at (3, 2, 1) rad/s without gravity: one implicitfast step.
+_SPIN_PROBE = """<mujoco><option integrator="implicitfast" gravity="0 0 0"/><worldbody>
+  <body><freejoint/><geom type="box" size="0.1 0.05 0.02" mass="1"/></body>
+</worldbody></mujoco>"""
+
+
+@functools.cache
+def free_body_spin_as_4_0() -> bool:
+    """Whether this MuJoCo integrates a spinning free body as 3.11 and 4.0 do (measured: its angular velocity changes by
+    other than ``timestep * qacc`` in a step) rather than as 3.3 does (by exactly that). Found by stepping a spinning box
+    once (well under a millisecond). States recorded under one rule cannot be replayed under the other once a free body
+    spins: in a Gripper episode of the shipped ``gripper-clearance`` the capsule's angular velocity parted by 7e-3 rad/s
+    in the substep after a finger first touched it."""
+    model = mujoco.MjModel.from_xml_string(_SPIN_PROBE)
+    data = mujoco.MjData(model)
+    data.qvel[3:6] = (3.0, 2.0, 1.0)
+    before = data.qvel[3:6].copy()
+    mujoco.mj_step(model, data)
+    change = (data.qvel[3:6] - before) / model.opt.timestep
+    return not np.allclose(change, data.qacc[3:6], rtol=1e-9, atol=1e-12)
 
 
 # --- MuJoCo's warnings -------------------------------------------------------------------------------------------
