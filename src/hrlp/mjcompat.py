@@ -12,9 +12,10 @@ What differs, measured on 3.3.7, 3.11.0 and 4.0.1 (docs/reliability.md, "MuJoCo 
   such step; :func:`free_body_spin_as_4_0` says which rule this MuJoCo has, for the tests that replay recorded ones.
 - ``Renderer.__del__`` of 3.3 reads an OpenGL context that a failed ``__init__`` never made (a second traceback at
   exit): :func:`open_renderer`.
-- MuJoCo's own warnings ("Nan, Inf or huge value in QACC at DOF 13. The simulation is unstable.") are printed to
-  stdout by 3.3 and appended to ``MUJOCO_LOG.TXT`` in the working directory by every version: :func:`route_warnings`
-  (called when this module is imported) sends them to the logger ``hrlp.mujoco`` instead, once per kind.
+- MuJoCo's own warnings ("Nan, Inf or huge value in QACC at DOF 13. The simulation is unstable.") are printed
+  (``WARNING: ...``, to stdout on 3.3) and appended to ``MUJOCO_LOG.TXT`` in the working directory by every version:
+  :func:`route_warnings` (called when this module is imported) sends them to the logger ``hrlp.mujoco`` instead, once
+  per kind.
 """
 
 from __future__ import annotations
