@@ -129,6 +129,7 @@ def test_gripper_recovery_writes_the_first_states_of_the_shipped_recovery_banks(
 
     from hrlp.arm.skill_files import shipped_library_root
     from hrlp.arm.tasks import GRIPPER_BANKS, gripper_start_bank, start_bank
+    from hrlp.mjcompat import free_body_spin_as_4_0
     from hrlp.skills import SkillLibrary
 
     out = _run("gripper_recovery.py", f"{args} --episodes 60 --out {tmp_path / 'b.npz'}", tmp_path)
@@ -136,13 +137,16 @@ def test_gripper_recovery_writes_the_first_states_of_the_shipped_recovery_banks(
     qpos, qvel = start_bank(str(tmp_path / "b.npz"))
     shipped_qpos, shipped_qvel = gripper_start_bank(bank)
     assert 0 < len(qpos) < len(shipped_qpos)  # the command's first 60 episodes: a prefix of the shipped bank's 3,000
-    # The shipped bank was simulated on another machine: MuJoCo's last digits differ between CPUs (up to 1e-11 here).
-    np.testing.assert_allclose(qpos, shipped_qpos[: len(qpos)], rtol=1e-6, atol=1e-8)
-    np.testing.assert_allclose(qvel, shipped_qvel[: len(qvel)], rtol=1e-6, atol=1e-6)
+    assert np.isfinite(qpos).all() and np.isfinite(qvel).all()
     with np.load(resources.files("hrlp.arm").joinpath(GRIPPER_BANKS[bank])) as z:  # recorded from this skill
         assert str(z["meta_skill_sha256"]) == SkillLibrary(shipped_library_root()).load(skill).content_hash
     again = _run("gripper_recovery.py", f"--episodes 1 --out {tmp_path / 'b.npz'}", tmp_path)
     assert again.returncode != 0 and "exists" in again.stderr
+    if not free_body_spin_as_4_0():  # MuJoCo 3.3: the banks' pushed capsules spin under another rule (hrlp.mjcompat)
+        pytest.skip("the shipped bank was recorded on a MuJoCo that integrates a spinning free body as 3.11 and 4.0 do")
+    # The shipped bank was simulated on another machine: MuJoCo's last digits differ between CPUs (up to 1e-11 here).
+    np.testing.assert_allclose(qpos, shipped_qpos[: len(qpos)], rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(qvel, shipped_qvel[: len(qvel)], rtol=1e-6, atol=1e-6)
 
 
 @pytest.mark.parametrize("clearance", [False, True], ids=["escape", "escape-and-clearance"])

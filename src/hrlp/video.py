@@ -84,7 +84,8 @@ def check_rendering(width: int, height: int) -> None:
 
     import mujoco
 
-    from hrlp.arm.physics import model_xml, open_renderer
+    from hrlp.arm.physics import model_xml
+    from hrlp.mjcompat import open_renderer
 
     model = mujoco.MjModel.from_xml_string(model_xml())
     max_w, max_h = int(model.vis.global_.offwidth), int(model.vis.global_.offheight)

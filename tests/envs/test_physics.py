@@ -155,20 +155,3 @@ def test_hand_to_capsule_axis_is_the_distance_to_the_capsules_core_segment(physi
     physics.forward()
     assert physics.hand_to_capsule_axis() == pytest.approx(expected, abs=1e-9)
     assert physics.hand_to_capsule() == pytest.approx(float(np.linalg.norm(offset)), abs=1e-9)
-
-
-def test_full_inertia_is_the_matrix_mujoco_multiplies_by_on_any_version():
-    from hrlp.arm.physics import full_inertia
-
-    p = ArmPhysics(PhysicsConfig())
-    p.reset()
-    p.data.qpos[:9] = np.linspace(-0.5, 0.5, 9)
-    p.forward()
-    nv = p.model.nv
-    m = full_inertia(p.model, p.data, np.zeros((nv, nv)))
-    columns, res = np.empty((nv, nv)), np.empty(nv)
-    for i in range(nv):
-        mujoco.mj_mulM(p.model, p.data, res, np.eye(nv)[i])  # M e_i, whatever mj_fullM's signature
-        columns[:, i] = res
-    np.testing.assert_allclose(m, columns, rtol=1e-12, atol=1e-14)
-    assert np.allclose(m, m.T) and (np.linalg.eigvalsh(m) > 0).all()

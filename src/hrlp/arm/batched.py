@@ -57,6 +57,7 @@ from hrlp.arm.physics import (
     OBS_FEATURES,
     ArmPhysics,
     PhysicsConfig,
+    configure_model,
     model_xml,
 )
 from hrlp.arm.registry import TASKS, ArmEnvFactory
@@ -109,10 +110,7 @@ def measured_model(config: PhysicsConfig, clearance: bool = False) -> mujoco.MjM
     for name, body in CLEARANCE_SENSORS if clearance else ():
         spec.add_sensor(name=name, type=_S.mjSENS_GEOMDIST, objtype=_O.mjOBJ_BODY, objname=body, reftype=_O.mjOBJ_GEOM,
                         refname="object", cutoff=CLEARANCE_CUTOFF)  # fmt: skip
-    model = spec.compile()
-    model.opt.timestep = config.timestep  # the two settings load_model applies
-    model.opt.gravity[:] = (0.0, 0.0, -9.81) if config.gravity else (0.0, 0.0, 0.0)
-    return model
+    return configure_model(spec.compile(), config)  # what load_model applies
 
 
 # --- measurements of N worlds and the tasks' formulas over them --------------------------------------------------

@@ -19,6 +19,8 @@ from importlib import resources
 import mujoco
 import numpy as np
 
+from hrlp.mjcompat import open_renderer, sum_contact_margins
+
 #: Joint names in actuator order (ARM_CLAW facts, joints 1..9).
 JOINTS: tuple[str, ...] = (
     "s_abduction",
@@ -93,35 +95,6 @@ class PhysicsConfig:
         return self.timestep * self.substeps
 
 
-#: MuJoCo 3.10 changed ``mj_fullM`` from ``(m, dst, M)`` (the sparse ``d.qM``) to ``(m, d, dst)``.
-_FULLM_TAKES_DATA = tuple(int(x) for x in mujoco.__version__.split(".")[:2]) >= (3, 10)
-
-
-def open_renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
-    """``mujoco.Renderer(model, height, width)``; one whose OpenGL context could not be made is closed before the error
-    goes on, so that no second traceback follows at exit (MuJoCo 3.3's ``Renderer.__del__`` reads the context it never
-    made)."""
-    renderer = mujoco.Renderer.__new__(mujoco.Renderer)
-    try:
-        renderer.__init__(model, height=height, width=width)  # type: ignore[misc]
-    except BaseException:
-        for name in ("_gl_context", "_mjr_context"):
-            if not hasattr(renderer, name):
-                setattr(renderer, name, None)
-        raise
-    return renderer
-
-
-def full_inertia(model: mujoco.MjModel, data: mujoco.MjData, out: np.ndarray) -> np.ndarray:
-    """The joint-space inertia matrix M(q) of ``data``'s state written into ``out [nv, nv]`` (and returned), with
-    whichever signature this MuJoCo's ``mj_fullM`` has (:data:`_FULLM_TAKES_DATA`)."""
-    if _FULLM_TAKES_DATA:
-        mujoco.mj_fullM(model, data, out)
-    else:  # MuJoCo before 3.10
-        mujoco.mj_fullM(model, out, data.qM)
-    return out
-
-
 @functools.cache
 def model_xml() -> str:
     """The MJCF text of the arm (shipped inside the package)."""
@@ -130,10 +103,16 @@ def model_xml() -> str:
 
 def load_model(config: PhysicsConfig = PhysicsConfig()) -> mujoco.MjModel:
     """A fresh ``MjModel`` of the arm with the timestep and gravity of ``config``."""
-    model = mujoco.MjModel.from_xml_string(model_xml())
+    return configure_model(mujoco.MjModel.from_xml_string(model_xml()), config)
+
+
+def configure_model(model: mujoco.MjModel, config: PhysicsConfig) -> mujoco.MjModel:
+    """Set, in place, what every compiled arm model gets: the timestep and gravity of ``config``, and contact margins
+    that are the sum of the two geoms' on every MuJoCo (:func:`hrlp.mjcompat.sum_contact_margins`; the shipped skills
+    were trained under that rule)."""
     model.opt.timestep = config.timestep
     model.opt.gravity[:] = (0.0, 0.0, -9.81) if config.gravity else (0.0, 0.0, 0.0)
-    return model
+    return sum_contact_margins(model)
 
 
 class PhysicsError(RuntimeError):

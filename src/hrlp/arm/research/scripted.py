@@ -41,7 +41,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from hrlp.arm.physics import ARM_JOINTS, BASE_AXIS_XY, CAPSULE_RADIUS, CAPSULE_REST_Z, N_JOINTS, ArmPhysics, full_inertia
+from hrlp.arm.physics import ARM_JOINTS, BASE_AXIS_XY, CAPSULE_RADIUS, CAPSULE_REST_Z, N_JOINTS, ArmPhysics
+from hrlp.mjcompat import full_inertia
 
 #: Motor gears of the 9 joints (ARM_CLAW facts): torque = gear * control.
 GEARS = np.array([100.0, 100.0, 100.0, 70.0, 70.0, 30.0, 30.0, 10.0, 10.0])
