@@ -11,7 +11,7 @@ from the bank and from the recipe's own start set, with Wilson 95% intervals. Th
 
 Each run is also evaluated from the paper's default starts (H 5-9 cm from C, the claw at rest). ``--evaluate RUN``
 evaluates a finished Gripper run of any recipe instead of training one (the from-scratch Grippers of
-``gripper-variants.json``'s ``from_scratch``, trained with ``hrlp train Gripper ...``: docs/results/README.md).
+``gripper-variants.json``'s ``from_scratch``, trained with ``hrlp train Gripper ...``: docs/research/results-notes.md).
 ``--graspable D V`` adds the bank's states from which a grip can start (d(H, C) <= D metres, the capsule slower than
 V m/s: :func:`hrlp.arm.research.dagger.graspable`), written to ``OUT/graspable.npz``.
 """
