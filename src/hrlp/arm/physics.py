@@ -218,7 +218,8 @@ class ArmPhysics:
         The 24 base numbers hold H and C, but a normaliser scales each coordinate by its spread over the workspace (tens
         of centimetres), so the millimetres between the claw and the capsule that a grip depends on are lost in it; the
         finger tips and the palm's orientation are functions of the joint angles that a small network learns poorly.
-        A Gripper imitating the scripted grasp fits it with a third less error given these numbers (docs/skills.md)."""
+        A Gripper imitating the scripted grasp fits it with a third less error given these numbers
+        (docs/research/skills-lineage.md)."""
         c, ax = self._capsule_v, self._claw_axes_v
         out[0:3] = self._hand_v - c
         out[3:6] = self._tip_v[0] - c

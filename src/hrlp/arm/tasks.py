@@ -685,7 +685,7 @@ class MoverTask(Task):
         with the claw opening, closing, or closed around it.
       - placed: H 5.5-6.5 cm above the capsule's centre (plain; within 1 cm horizontally) or 5-10 cm
         from it in the upper half-space (noised), the claw at rest. Closer hand starts put a finger
-        inside the capsule. From these starts a Mover never learned to grip (docs/skills.md).
+        inside the capsule. From these starts a Mover never learned to grip (docs/research/skills-lineage.md).
       - held: a state recorded along an episode of the ``gripper-imitated`` skill in which the capsule is in the claw
         (Definition 1 holds): a Mover that only carries, after a Gripper has gripped.
     Success: d(C, T) < success_tol. Tracks d(C, T) so the episode's TargetDistSum is reported.

@@ -287,7 +287,7 @@ def _appendix_c_tuned() -> tuple[Preset, ...]:
     )
 
 
-#: The imitated Gripper's imitation (docs/results/README.md, "Imitation, then TRPO"): 150 expert episodes and 250 with
+#: The imitated Gripper's imitation (docs/research/results-notes.md, "Imitation, then TRPO"): 150 expert episodes and 250 with
 #: DART noise of std 0.3, two DAgger rounds of 200 episodes (the expert acting with probability 0.5, then 0.25), 30 epochs
 #: per fit on minibatches of 512, the best round's student (100 episodes alone) kept; the expert's first version
 #: (``expert_keep_clear=False``: the shipped ``gripper-imitated`` was imitated from it, before its moves kept clear).
@@ -295,14 +295,14 @@ IMITATED_GRIPPER = ImitationConfig(expert_episodes=150, dagger_rounds=2, dagger_
                                    noisy_expert_episodes=250, expert_noise=0.3, beta=0.5, eval_episodes=100,
                                    expert_keep_clear=False)  # fmt: skip
 
-#: The imitation of the Gripper that sees its claw relative to the capsule (``gripper-claw``, docs/skills.md): 300 expert
-#: episodes and 300 with DART noise of std 0.3, four DAgger rounds of 200 episodes in which the student acts alone, 40
-#: epochs per fit on minibatches of 512 with the learning rate annealed to 0, the best round's student (100 episodes
-#: alone) kept; the expert whose moves keep clear.
+#: The imitation of the Gripper that sees its claw relative to the capsule (``gripper-claw``,
+#: docs/research/skills-lineage.md): 300 expert episodes and 300 with DART noise of std 0.3, four DAgger rounds of 200
+#: episodes in which the student acts alone, 40 epochs per fit on minibatches of 512 with the learning rate annealed to
+#: 0, the best round's student (100 episodes alone) kept; the expert whose moves keep clear.
 CLAW_GRIPPER = ImitationConfig(expert_episodes=300, noisy_expert_episodes=300, expert_noise=0.3, dagger_rounds=4,
                                dagger_episodes=200, epochs=40, minibatch=512, lr_decay=True, eval_episodes=100)  # fmt: skip
 #: gripper-clearance's imitation: the scripted grasp with its escape from tight starts, and five times the round-0 data of
-#: CLAW_GRIPPER (1,000 expert and 1,000 noisy-expert episodes, 400 per DAgger round); docs/skills.md.
+#: CLAW_GRIPPER (1,000 expert and 1,000 noisy-expert episodes, 400 per DAgger round); docs/research/skills-lineage.md.
 CLEARANCE_GRIPPER = replace(CLAW_GRIPPER, expert_episodes=1000, noisy_expert_episodes=1000, dagger_episodes=400,
                             expert_escape_clearance=0.01)  # fmt: skip
 

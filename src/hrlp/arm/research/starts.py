@@ -2,9 +2,9 @@
 
 The paper trains the Mover from starts with the palm close to the capsule (Section 4.1, Experiment 2). On this arm a
 Mover trained from hand-placed starts (claw at rest, 5-6.5 cm above the capsule) never learns to grip, and so never
-moves the capsule (docs/skills.md). :func:`record_grip_starts` runs the shipped Gripper skill from the Gripper task's
-close, open-claw starts and keeps the physics states of the episodes in which it grips the capsule, from their first
-step to their last: states on the way to a grip, and gripped ones. ``MoverTask(starts="grip")`` draws from them;
+moves the capsule (docs/research/skills-lineage.md). :func:`record_grip_starts` runs the shipped Gripper skill from the
+Gripper task's close, open-claw starts and keeps the physics states of the episodes in which it grips the capsule, from
+their first step to their last: states on the way to a grip, and gripped ones. ``MoverTask(starts="grip")`` draws from them;
 ``MoverTask(starts="held")`` from the states of ``gripper-imitated``'s episodes in which the capsule is held
 (``held=True``): a Mover that only has to carry.
 
