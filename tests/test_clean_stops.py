@@ -1,4 +1,4 @@
-"""How a run ends when something outside it ends it (docs/reliability.md, "Stopping"): SIGINT, SIGTERM and SIGHUP sent
+"""How a run ends when something outside it ends it (docs/reliability.md, "How a run stops"): SIGINT, SIGTERM and SIGHUP sent
 to the whole process group at several moments of real ``python -m hrlp`` processes (start-up, worker start-up, after a
 checkpoint with two sampling workers, during a save, a second signal while stopping) end in one line, no traceback,
 exit code 128 + the signal, and a run that ``--resume`` continues from its last completed iteration; a user's

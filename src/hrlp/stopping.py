@@ -1,5 +1,5 @@
 """How a run stops when something outside it ends it: SIGINT (Ctrl-C), SIGTERM (a scheduler's preemption) and SIGHUP
-(a closed terminal) all end it the same way (docs/reliability.md, "Stopping").
+(a closed terminal) all end it the same way (docs/reliability.md, "How a run stops").
 
 * :func:`install_stop_handlers` -- the ``hrlp`` command installs it first thing, before it imports anything heavy:
   from then on each of the three signals raises :class:`Stopped` in the main thread, wherever it is (importing torch,

@@ -1,4 +1,4 @@
-"""Faults of a user's environment, reported with their context (docs/reliability.md, "Stopping").
+"""Faults of a user's environment, reported with their context (docs/reliability.md, "How a run stops").
 
 An environment whose ``step`` or ``reset`` raises, returns something other than Gymnasium's tuples (the old Gym API
 included) or an observation that does not fit its declared space is the user's code failing, not hrlp: the run ends
