@@ -12,6 +12,7 @@ from hrlp.config import Handover
 from hrlp.experiments.presets import PRESETS, Preset, Run
 from hrlp.experiments.runner import plan, reproduce, training_seconds
 from hrlp.experiments.tables import bootstrap_interval, build_tables
+from hrlp.fetch import check_installed
 from hrlp.plots import read_progress
 from hrlp.train import TrainConfig, env_factory
 
@@ -33,9 +34,16 @@ def test_every_preset_builds_valid_configs_with_distinct_run_names():
         assert all(job.config.steps == 123 for job in plan(p.with_budget(123), __import__("pathlib").Path("out")))
     # Every environment a preset trains in can be built: its task arguments are valid and its skills are shipped.
     built = set()
+    try:
+        check_installed()
+        fetch = True
+    except ValueError:  # Gymnasium-Robotics' Fetch does not run on this MuJoCo (tests/fetch builds them where it does)
+        fetch = False
     for p in PRESETS.values():
         for r in p.runs:
             c = r.config
+            if c.task.startswith("gymnasium_robotics:Fetch") and not fetch:
+                continue
             key = (c.task, c.macro, json.dumps(c.task_kwargs, sort_keys=True), c.episode_steps)
             if key not in built:
                 env_factory(c.task, c.episode_steps, c.macro, c.advantage.gamma, **c.task_kwargs)().close()

@@ -10,7 +10,7 @@ import torch
 
 from hrlp.algos.ppo import PPOConfig, clipped_surrogate, ppo_update
 from hrlp.checkpoint import load_checkpoint
-from hrlp.config import AdvantageConfig, TrainConfig, TRPOConfig
+from hrlp.config import OFF_POLICY, AdvantageConfig, TrainConfig, TRPOConfig
 from hrlp.experiments.runner import _same_config
 from hrlp.policies.distributions import Categorical, DiagGaussian, Hierarchical
 from hrlp.train import train
@@ -140,6 +140,8 @@ def test_every_presets_runs_made_before_the_advantage_record_are_still_found_and
         for run in preset.runs:
             cfg = run.config
             where = (preset.name, run.name)
+            if cfg.algo in OFF_POLICY:  # the Fetch presets: SAC from the start, no record before the advantage's
+                continue
             assert cfg.algo == "trpo" and cfg.advantage == AdvantageConfig(gamma=0.99, gae_lambda=0.97), where
             old = cfg.to_json()
             old["trpo"] = {**old["trpo"], **old.pop("advantage")}

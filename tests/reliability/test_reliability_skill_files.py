@@ -26,8 +26,9 @@ from hrlp.train import TrainConfig, load_policy, train
 LOAD_KINDS = ("weights-fifo", "meta-fifo", "weights-dev-zero", "meta-huge", "meta-deep", "obs-dim-huge", "hidden-huge",
               "block-misfit", "weights-nan", "weights-int", "k-fraction", "entry-linked-outside", "name-parent",
               "name-absolute", "weights-pickle")  # fmt: skip
-SHIPPED = ("gripper", "gripper-claw", "gripper-clearance", "gripper-imitated", "gripper-recovery", "gripper-recovery-2",
-           "mover-held", "mover-noised", "mover-plain", "reacher", "reacher-handover", "reacher3d", "s-reacher")  # fmt: skip
+SHIPPED = ("fetch-reach", "gripper", "gripper-claw", "gripper-clearance", "gripper-imitated", "gripper-recovery",
+           "gripper-recovery-2", "mover-held", "mover-noised", "mover-plain", "reacher", "reacher-handover", "reacher3d",
+           "s-reacher")  # fmt: skip  # the arm's and Fetch's shipped skills
 
 
 @pytest.fixture(scope="module")
