@@ -97,3 +97,25 @@ def test_a_manager_over_the_fetch_skills_trains_and_evaluates_through_the_comman
     assert r.exit_code == 0, r.output
     ev = evaluate_run(tmp_path / "run", episodes=4)
     assert ev.episodes == 4 and ev.success is not None and set(ev.macro_usage or {}) == {"reach", "grasp", "carry"}
+
+
+@pytest.mark.slow
+def test_the_fetch_skills_recipe_rebuilds_a_reach_that_reaches_on_pick_and_place(tmp_path):
+    """``hrlp skills build --preset fetch-skills`` trains fetch-reach from its recipe (SAC + HER on FetchReach, 10,000
+    steps) and writes a library skill that, run as the ``reach`` skill does, reaches points above the object."""
+    r = CliRunner().invoke(app, ["skills", "build", "--preset", "fetch-skills", "--library", str(tmp_path / "lib"),
+                                 "--out", str(tmp_path / "runs"), "--workers", "1"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    from hrlp.skills.core import Holding, Seeing
+    from hrlp.training.sources import resolve_skill
+
+    rebuilt = Holding(Seeing(resolve_skill("fetch-reach", tmp_path / "lib"), fs.BLOCKED_FINGERS), {3: fs.OPEN})
+    env = gym.make(PICK)
+    m = MacroEnv(env, [rebuilt])
+    errors = []
+    for seed in range(10):
+        obs, _ = m.reset(seed=seed)
+        point = ObsView(obs[None], m.layout, np.array([0]))["object_pos"][0] + [0.0, 0.0, 0.05]
+        obs, *_ = _decide(m, 0, point)
+        errors.append(np.linalg.norm(ObsView(obs[None], m.layout, np.array([0]))["grip_pos"][0] - point))
+    assert np.median(errors) < 0.03, errors
