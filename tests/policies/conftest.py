@@ -1,4 +1,4 @@
-"""Tiny networks run fastest on one intra-op thread (PERFORMANCE.md: 2-5x slower with two)."""
+"""Tiny networks run fastest on one intra-op thread (benchmarks/policy_call.py: a call on 64 observations took 1.84x as long with two)."""
 
 import torch
 
