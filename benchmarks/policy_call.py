@@ -17,7 +17,7 @@ import torch
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP
 
 
-def per_call(fn, calls: int) -> float:  # noqa: ANN001 (a benchmark's closure)
+def per_call(fn, calls: int) -> float:
     """Mean seconds per call of ``fn`` over ``calls`` calls, after 50 warm-up calls."""
     for _ in range(50):
         fn()
