@@ -1,7 +1,8 @@
 """Batched sampling: many environments stepped together, one policy call per step for all of them.
 
 Per-observation policy calls, not physics, are what make RL libraries slow on small networks (a torch call on 64
-observations costs what one on a single observation does: ``benchmarks/policy_call.py``), so the sampler keeps ``N`` environments in one process and asks the
+observations costs what one on a single observation does: ``benchmarks/policy_call.py``), so the sampler keeps ``N``
+environments in one process and asks the
 policy for ``N`` actions at once. It sees them only as a :class:`~hrlp.envs.vector.VectorEnv`
 (one step record, same-step autoreset): ordinary Gymnasium environments (:class:`~hrlp.envs.vector.SerialVectorEnv`),
 a Manager's macro-action environments (:class:`~hrlp.skills.macro_env.ManagerVectorEnv`, batched skill

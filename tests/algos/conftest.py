@@ -1,4 +1,5 @@
-"""Tiny networks run fastest on one intra-op thread (benchmarks/policy_call.py: a call on 64 observations took 1.84x as long with two)."""
+"""Tiny networks run fastest on one intra-op thread (benchmarks/policy_call.py: a call on 64 observations took 1.84x
+as long with two)."""
 
 import torch
 

@@ -6,7 +6,8 @@ output layer holds the macro-action logits and all parameter means, plus a state
 
 Acting is batched: :meth:`Policy.act_numpy` takes ``[N, obs_dim]`` observations of ``N`` environments and returns
 ``N`` actions in one no-grad call, because per-observation torch calls (about 0.17 ms each, whatever the batch:
-``benchmarks/policy_call.py``) dominate sampling time. :class:`NumpyMLP` is a frozen NumPy copy of a network for single-observation loops.
+``benchmarks/policy_call.py``) dominate sampling time. :class:`NumpyMLP` is a frozen NumPy copy of a network for
+single-observation loops.
 """
 
 from __future__ import annotations
