@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.extended  # CI runs them in a pass of their own (.ci/run); the default suite stays short
+
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 CASES = {  # script: (arguments, a line its output must contain)

@@ -289,6 +289,7 @@ def test_bootstrap_interval_and_bad_input(tmp_path):
     assert r.exit_code == 2 and "no finished runs" in r.output
 
 
+@pytest.mark.extended  # starting Ray takes most of a minute: CI runs it in its extended pass
 def test_ray_backend_runs_the_same_grid_on_a_local_ray_instance(tmp_path):
     ray = pytest.importorskip("ray")
     try:
