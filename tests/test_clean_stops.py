@@ -186,6 +186,22 @@ def test_a_stop_signal_after_the_first_checkpoint_with_two_workers_keeps_the_las
         assert load_checkpoint(run / "checkpoint")[1]["iteration"] == n + 1 and logged(run) == list(range(1, n + 2))
 
 
+@pytest.mark.extended  # a preset's run with the paper's settings: its first checkpoint takes most of a minute
+def test_a_ctrl_c_during_a_reproduce_grid_keeps_every_runs_last_checkpoint_in_one_line(tmp_path):
+    out = tmp_path / "grid"
+    proc = start("reproduce", "shipped-skills", "--only", "reacher", "--seeds", "2", "--budget", "10000000", "--workers",
+                 "2", "--out", str(out), cwd=tmp_path)  # fmt: skip
+    wait_until(proc, lambda: len(list(out.glob("**/checkpoint/meta.json"))) == 2, "both runs' first checkpoints", 300)
+    code, output = signal_group(proc, signal.SIGINT)
+    assert code == 130
+    line = the_line(output, signal.SIGINT)
+    assert line == ("stopped by SIGINT; finished runs are kept, and the same command continues the others from their last "
+                    "checkpoints"), line  # fmt: skip
+    for meta in out.glob("**/checkpoint/meta.json"):  # each run whole at its last completed iteration
+        run = meta.parent.parent
+        assert load_checkpoint(run / "checkpoint")[1]["iteration"] == logged(run)[-1] >= 1
+
+
 def test_a_second_ctrl_c_while_stopping_exits_at_once(tmp_path):
     run = tmp_path / "run"
     # SlowClose takes 20 s to close: with one worker (sampling in the main process) the first Ctrl-C is still being
