@@ -29,6 +29,34 @@ NAMES = {"manager": "hrlp Manager (SAC + HER over skills)", "sac": "hrlp SAC + H
          "ppo": "hrlp PPO, flat", "sb3": "Stable-Baselines3 SAC + HER, flat"}  # fmt: skip
 
 
+def _targets(res: dict[str, Any]) -> list[str]:
+    """The Fetch issue's targets for this task, each said met or not met, from the runs at hand."""
+    task, n = res["task"], res["eval_episodes"]
+    runs = {m: [r for r in res["runs"].values() if r["method"] == m] for m in ("manager", "sb3", "sac")}
+    out = []
+    if mgr := runs["manager"]:
+        finals = [r["curve"][-1][1] for r in mgr]
+        pooled = wilson_interval(round(sum(finals) * n), n * len(finals))
+        met = "met" if pooled.mean >= TARGETS[task] and len(mgr) >= 3 else "not met"
+        out.append(f"- Manager greedy success >= {TARGETS[task]} over 3 seeds: **{met}** ({pooled.mean:.3f} over {len(mgr)} "
+                   f"seed(s)).")  # fmt: skip
+        her = [r for m in ("sb3", "sac") for r in runs[m]]
+        reached = [r["steps_to_0.9"] for r in mgr]
+        if all(s is not None for s in reached) and her:
+            worst = max(s for s in reached if s is not None)
+            if any(r["steps_to_0.9"] is not None for r in her):
+                first = min(r["steps_to_0.9"] for r in her if r["steps_to_0.9"] is not None)
+                out.append(f"- 10x fewer steps to 0.9 than HER: {'**met**' if first >= 10 * worst else '**not met**'} "
+                           f"({worst:,} against {first:,}).")  # fmt: skip
+            else:
+                out.append(f"- 10x fewer steps to 0.9 than HER, and 2x with the skills' training: **not established**: HER "
+                           f"did not reach 0.9 within these {res['steps']:,} steps (the Manager needed at most {worst:,}; "
+                           f"{worst + res['skill_steps']:,} with its skills), and was not run here to 1M steps.")  # fmt: skip
+        else:
+            out.append("- Steps to 0.9 against HER: **not established** (the Manager or HER did not reach 0.9 here).")
+    return out
+
+
 def _method_rows(res: dict[str, Any]) -> list[str]:
     by: dict[str, list[dict[str, Any]]] = {}
     for r in res["runs"].values():
@@ -63,7 +91,7 @@ def report(results: list[dict[str, Any]]) -> str:
                 f"{res['eval_every']:,} steps on {res['eval_episodes']} episodes. The Manager's learned skills took "
                 f"{res['skill_steps']:,} steps of their own. Published: {ZOO[task]}.", "",
                 "| method | seeds | final greedy success [95%] | per seed | steps to 0.9 | with skills | core-hours |",
-                "|---|---|---|---|---|---|---|", *_method_rows(res), ""]  # fmt: skip
+                "|---|---|---|---|---|---|---|", *_method_rows(res), "", "Targets:", "", *_targets(res), ""]  # fmt: skip
     return "\n".join(out) + "\n"
 
 
