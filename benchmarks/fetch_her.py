@@ -78,6 +78,20 @@ def hrlp_run(task: str, method: str, seed: int, steps: int, eval_every: int, eva
     return {"curve": curve, "wall_s": time.perf_counter() - t0}
 
 
+def sb3_greedy_success(model: Any, env: Any, episodes: int) -> float:
+    """A Stable-Baselines3 model's greedy success rate on ``env`` over ``episodes`` episodes (seeds 10,000 + i)."""
+    wins = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=10_000 + i)
+        done, info = False, {}
+        while not done:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, term, trunc, info = env.step(action)
+            done = term or trunc
+        wins.append(float(info["is_success"]))
+    return float(np.mean(wins))
+
+
 def sb3_run(task: str, seed: int, steps: int, eval_every: int, eval_episodes: int) -> dict:
     """Stable-Baselines3's SAC + HER (the module docstring's settings); the greedy success every ``eval_every`` steps."""
     import gymnasium as gym
@@ -88,22 +102,10 @@ def sb3_run(task: str, seed: int, steps: int, eval_every: int, eval_episodes: in
     eval_env = gym.make(env_id)
     curve: list[tuple[int, float]] = []
 
-    def greedy(model: SAC) -> float:
-        wins = []
-        for i in range(eval_episodes):
-            obs, _ = eval_env.reset(seed=10_000 + i)
-            done, info = False, {}
-            while not done:
-                action, _ = model.predict(obs, deterministic=True)
-                obs, _, term, trunc, info = eval_env.step(action)
-                done = term or trunc
-            wins.append(float(info["is_success"]))
-        return float(np.mean(wins))
-
     class Every(BaseCallback):
         def _on_step(self) -> bool:
             if self.num_timesteps % eval_every == 0 or self.num_timesteps == steps:
-                curve.append((self.num_timesteps, greedy(self.model)))
+                curve.append((self.num_timesteps, sb3_greedy_success(self.model, eval_env, eval_episodes)))
                 print(f"  {task} sb3 seed {seed}: {self.num_timesteps:,} steps, greedy success {curve[-1][1]:.2f}", flush=True)
             return True
 

@@ -14,8 +14,9 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
-import numpy as np
 import torch
+
+from fetch_her import sb3_greedy_success
 
 
 def main() -> None:
@@ -37,16 +38,7 @@ def main() -> None:
     t0 = time.perf_counter()
     model.learn(total_timesteps=args.steps)
     print(f"trained {args.steps:,} steps in {time.perf_counter() - t0:.0f} s")
-    successes = []
-    for i in range(args.eval_episodes):
-        obs, _ = env.reset(seed=10_000 + i)
-        done = False
-        while not done:
-            action, _ = model.predict(obs, deterministic=True)
-            obs, _, term, trunc, info = env.step(action)
-            done = term or trunc
-        successes.append(float(info["is_success"]))
-    print(f"greedy success over {args.eval_episodes} episodes: {np.mean(successes):.2f}")
+    print(f"greedy success over {args.eval_episodes} episodes: {sb3_greedy_success(model, env, args.eval_episodes):.2f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     model.save(args.out)
     print(f"written {args.out}")

@@ -23,6 +23,8 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from fetch_her import sb3_greedy_success
+
 TASK = "FetchReach-v4"
 
 
@@ -52,17 +54,9 @@ def sb3_run(seed: int, steps: int, eval_episodes: int) -> dict[str, Any]:
     t0 = time.perf_counter()
     model.learn(total_timesteps=steps)
     train_s = time.perf_counter() - t0
-    successes = []
-    for i in range(eval_episodes):
-        obs, _ = env.reset(seed=10_000 + i)
-        done = False
-        while not done:
-            action, _ = model.predict(obs, deterministic=True)
-            obs, _, terminated, truncated, info = env.step(action)
-            done = terminated or truncated
-        successes.append(float(info["is_success"]))
+    success = sb3_greedy_success(model, env, eval_episodes)
     env.close()
-    return {"seed": seed, "success": float(np.mean(successes)), "train_s": train_s}
+    return {"seed": seed, "success": success, "train_s": train_s}
 
 
 def main(argv: list[str] | None = None) -> int:
