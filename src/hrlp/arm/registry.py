@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import traceback
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -218,8 +220,17 @@ def probe_task(task: str, episode_steps: int | None = None, /, **kwargs: Any) ->
             raise ValueError(invalid_arguments_line(task, unknown, valid)) from None
         raise ValueError(f"{task}: invalid task arguments {kwargs}: {' '.join(str(e).split())}") from None
     except Exception as e:  # a third-party constructor given the user's arguments: say so in one line
-        raise ValueError(f"{task}: cannot be built with the task arguments {kwargs}: {' '.join(str(e).split())}") from None
+        raise ValueError(f"{task}: cannot be built with the task arguments {kwargs}: {_raised(e)}") from None
     spaces = env.observation_space, env.action_space
     env.close()
     check_spaces(task, *spaces)
     return spaces
+
+
+def _raised(e: BaseException) -> str:
+    """``Type: message (in file.py:line, function)``, the innermost frame of ``e``: what failed and where, also for an
+    exception without a message (an ``assert`` in a third-party constructor)."""
+    message = " ".join(str(e).split())
+    frames = traceback.extract_tb(e.__traceback__)
+    where = f" (in {Path(frames[-1].filename).name}:{frames[-1].lineno}, {frames[-1].name})" if frames else ""
+    return f"{type(e).__name__}{': ' + message if message else ''}{where}"

@@ -10,6 +10,7 @@ looks up an environment's parts (``pip install "hrlp[fetch]"`` installs the envi
 
 from __future__ import annotations
 
+import importlib.metadata
 from pathlib import Path
 
 from hrlp.skills.core import register_observation_parts
@@ -42,8 +43,6 @@ FIRST_FAILING_MUJOCO = (3, 12)
 
 def check_installed() -> None:
     """Raise a one-line ValueError unless Gymnasium-Robotics is installed with a MuJoCo its Fetch runs on."""
-    import importlib.metadata
-
     try:
         importlib.metadata.version("gymnasium-robotics")
     except importlib.metadata.PackageNotFoundError:

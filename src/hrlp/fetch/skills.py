@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from hrlp.fetch import REACH_BIND
-from hrlp.skills.core import Holding, ObsView, ParamBox, ScriptedSkill, Seeing, Skill
+from hrlp.skills.core import Holding, ObsView, ParamBox, ScriptedSkill, Seeing, Skill, Wrapped
 from hrlp.skills.library import load_skill
 from hrlp.skills.policy import from_sb3
 
@@ -179,7 +179,7 @@ def reach() -> Skill:
     learned = load_skill("fetch-reach")
     near_object = ParamBox((-0.1, -0.1, -0.02), (0.1, 0.1, 0.1), "point to move the gripper to, offset from the object (m)",
                            frame="object_pos")  # fmt: skip
-    return Holding(Seeing(_reparameterised(learned, near_object), BLOCKED_FINGERS), {3: OPEN}, "reach")
+    return Holding(Seeing(Wrapped(learned, params=near_object), BLOCKED_FINGERS), {3: OPEN}, "reach")
 
 
 def carry() -> Skill:
@@ -190,14 +190,6 @@ def carry() -> Skill:
     learned = from_sb3(path, "carry", param="desired_goal", low=WORKSPACE_LOW, high=WORKSPACE_HIGH, k=15,
                        done_part="grip_pos", done_within=0.02, bind=REACH_BIND)  # fmt: skip
     return Holding(Seeing(learned, BLOCKED_FINGERS), {3: CLOSED}, "carry")
-
-
-def _reparameterised(skill: Skill, box: ParamBox) -> Skill:
-    """``skill`` with another parameter box (same width): what the Manager's block means changes, not what it runs."""
-    if box.dim != skill.params.dim:
-        raise ValueError(f"skill {skill.name}: a box of {box.dim} numbers for {skill.params.dim} parameters")
-    skill.params = box
-    return skill
 
 
 __all__ = ["CLOSED", "OPEN", "STEP_M", "WORKSPACE_HIGH", "WORKSPACE_LOW", "Strike", "carry", "grasp", "push", "reach",

@@ -324,7 +324,40 @@ class ScriptedSkill(Skill):
         return None if self._done is None else np.asarray(self._done(obs, params), dtype=bool).reshape(len(obs))
 
 
-class Holding(Skill):
+class Wrapped(Skill):
+    """``skill`` under another name or parameter box (same width): what the Manager's block means changes, not what it
+    runs. The base of skills that change what a skill sees (:meth:`view`) or does (:class:`Holding`, :class:`Seeing`);
+    everything not overridden (parts, duration, initiation, end, cost) is ``skill``'s."""
+
+    def __init__(self, skill: Skill, name: str | None = None, params: ParamBox | None = None) -> None:
+        if params is not None and params.dim != skill.params.dim:
+            raise ValueError(f"skill {skill.name}: a parameter box of {params.dim} numbers for {skill.params.dim} parameters")
+        self.skill, self.name = skill, str(name or skill.name)
+        self.params = skill.params if params is None else params
+        self.k, self.reads, self.chains, self.cost = skill.k, skill.reads, skill.chains, skill.cost
+        self.has_done = bool(getattr(skill, "has_done", type(skill).done is not Skill.done))
+
+    def view(self, obs: ObsView) -> ObsView:
+        """What the wrapped skill sees of ``obs`` (the same view here)."""
+        return obs
+
+    def check(self, layout: ObsLayout, action_space: gym.spaces.Box, measured: Sequence[str] = ()) -> None:
+        self.skill.check(layout, action_space, measured)
+
+    def begin(self, obs: ObsView, params: np.ndarray) -> None:
+        self.skill.begin(self.view(obs), params)
+
+    def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
+        return self.skill.act(self.view(obs), params)
+
+    def initiable(self, obs: ObsView) -> np.ndarray | None:
+        return self.skill.initiable(self.view(obs))
+
+    def done(self, obs: ObsView, params: np.ndarray) -> np.ndarray | None:
+        return self.skill.done(self.view(obs), params)
+
+
+class Holding(Wrapped):
     """``skill`` with some entries of its action held at fixed values, e.g. a reaching policy trained where the gripper
     was blocked, run with the gripper held open: ``Holding(reach, {3: 1.0}, "reach_open")``. Everything else (its
     parameters, parts, duration, initiation and end) is ``skill``'s."""
@@ -332,31 +365,20 @@ class Holding(Skill):
     def __init__(self, skill: Skill, held: Mapping[int, float], name: str | None = None) -> None:
         if not held:
             raise ValueError(f"skill {skill.name}: Holding needs at least one action entry to hold")
-        self.skill, self.name = skill, str(name or skill.name)
+        super().__init__(skill, name)
         self.held = {int(i): float(v) for i, v in held.items()}
-        self.params, self.k, self.reads, self.chains, self.cost = skill.params, skill.k, skill.reads, skill.chains, skill.cost
-        self.has_done = bool(getattr(skill, "has_done", type(skill).done is not Skill.done))
 
     def check(self, layout: ObsLayout, action_space: gym.spaces.Box, measured: Sequence[str] = ()) -> None:
-        self.skill.check(layout, action_space, measured)
+        super().check(layout, action_space, measured)
         a = int(np.prod(action_space.shape))
         if bad := [i for i in self.held if not 0 <= i < a]:
             raise ValueError(f"skill {self.name} holds action entries {bad}; this environment's action has {a} numbers")
-
-    def begin(self, obs: ObsView, params: np.ndarray) -> None:
-        self.skill.begin(obs, params)
 
     def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
         out = np.array(self.skill.act(obs, params), dtype=np.float64)
         for i, v in self.held.items():
             out[:, i] = v
         return out
-
-    def initiable(self, obs: ObsView) -> np.ndarray | None:
-        return self.skill.initiable(obs)
-
-    def done(self, obs: ObsView, params: np.ndarray) -> np.ndarray | None:
-        return self.skill.done(obs, params)
 
 
 class _Shown(ObsView):
@@ -375,35 +397,24 @@ class _Shown(ObsView):
         return _Shown(super().rows(which), self._shown)
 
 
-class Seeing(Skill):
+class Seeing(Wrapped):
     """``skill`` shown some observation parts as constants: a policy trained where a part never changed (FetchReach's
     blocked fingers, ``gripper_state`` always 0) sees it as it was in training wherever it runs,
     ``Seeing(reach, {"gripper_state": [0, 0]})``. The parts must exist in the environment (their width is checked)."""
 
     def __init__(self, skill: Skill, shown: Mapping[str, Any], name: str | None = None) -> None:
-        self.skill, self.name = skill, str(name or skill.name)
+        super().__init__(skill, name)
         self.shown = {str(p): np.asarray(v, dtype=np.float64).reshape(-1) for p, v in shown.items()}
-        self.params, self.k, self.reads, self.chains, self.cost = skill.params, skill.k, skill.reads, skill.chains, skill.cost
-        self.has_done = bool(getattr(skill, "has_done", type(skill).done is not Skill.done))
+
+    def view(self, obs: ObsView) -> ObsView:
+        return _Shown(obs, self.shown)
 
     def check(self, layout: ObsLayout, action_space: gym.spaces.Box, measured: Sequence[str] = ()) -> None:
-        self.skill.check(layout, action_space, measured)
+        super().check(layout, action_space, measured)
         for part, value in self.shown.items():
             if part in layout.names and layout.width(part) != value.size:
                 raise ValueError(f"skill {self.name} is shown {value.size} numbers as part {part!r}, which has "
                                  f"{layout.width(part)}")  # fmt: skip
-
-    def begin(self, obs: ObsView, params: np.ndarray) -> None:
-        self.skill.begin(_Shown(obs, self.shown), params)
-
-    def act(self, obs: ObsView, params: np.ndarray) -> np.ndarray:
-        return self.skill.act(_Shown(obs, self.shown), params)
-
-    def initiable(self, obs: ObsView) -> np.ndarray | None:
-        return self.skill.initiable(_Shown(obs, self.shown))
-
-    def done(self, obs: ObsView, params: np.ndarray) -> np.ndarray | None:
-        return self.skill.done(_Shown(obs, self.shown), params)
 
 
 class DirectControl(Skill):
@@ -617,6 +628,7 @@ __all__ = [
     "ScriptedSkill",
     "Seeing",
     "Skill",
+    "Wrapped",
     "decide",
     "initiated",
     "observation_parts",
