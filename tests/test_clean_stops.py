@@ -51,6 +51,16 @@ def start(*args: str, cwd: Path, nohup: bool = False) -> subprocess.Popen:
 
 def group(pgid: int) -> list[int]:
     """The processes of group ``pgid`` still running (zombies, which have exited, left out)."""
+    return _running(2, pgid)
+
+
+def session(sid: int) -> list[int]:
+    """The processes of session ``sid`` still running (Ray puts each trial's worker in a process group of its own)."""
+    return _running(3, sid)
+
+
+def _running(field: int, value: int) -> list[int]:
+    """The running processes whose ``/proc/PID/stat`` field ``field`` (after the name; 2: group, 3: session) is ``value``."""
     out = []
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
@@ -58,7 +68,7 @@ def group(pgid: int) -> list[int]:
                 fields = (entry / "stat").read_text().rsplit(") ", 1)[1].split()
             except (OSError, IndexError):
                 continue
-            if int(fields[2]) == pgid and fields[0] != "Z":
+            if int(fields[field]) == value and fields[0] != "Z":
                 out.append(int(entry.name))
     return out
 
@@ -198,6 +208,24 @@ def test_a_ctrl_c_during_a_reproduce_grid_keeps_every_runs_last_checkpoint_in_on
     assert line == ("stopped by SIGINT; finished runs are kept, and the same command continues the others from their last "
                     "checkpoints"), line  # fmt: skip
     for meta in out.glob("**/checkpoint/meta.json"):  # each run whole at its last completed iteration
+        run = meta.parent.parent
+        assert load_checkpoint(run / "checkpoint")[1]["iteration"] == logged(run)[-1] >= 1
+
+
+@pytest.mark.extended  # starting Ray takes most of a minute
+def test_a_sigterm_during_a_ray_sweep_cancels_its_trials_and_keeps_their_last_checkpoints(tmp_path):
+    pytest.importorskip("ray")
+    out = tmp_path / "grid"
+    proc = start("reproduce", "shipped-skills", "--only", "reacher", "--seeds", "2", "--budget", "10000000", "--backend",
+                 "ray", "--out", str(out), cwd=tmp_path)  # fmt: skip
+    wait_until(proc, lambda: len(list(out.glob("**/checkpoint/meta.json"))) == 2, "both trials' first checkpoints", 300)
+    t0 = time.monotonic()
+    code, output = signal_group(proc, signal.SIGTERM)
+    assert code == 143 and time.monotonic() - t0 < 30, output
+    assert the_line(output, signal.SIGTERM) == ("stopped by SIGTERM; finished runs are kept, and the same command continues "
+                                                "the others from their last checkpoints")  # fmt: skip
+    assert not session(proc.pid)  # Ray's trials and the local instance's processes are gone too
+    for meta in out.glob("**/checkpoint/meta.json"):
         run = meta.parent.parent
         assert load_checkpoint(run / "checkpoint")[1]["iteration"] == logged(run)[-1] >= 1
 

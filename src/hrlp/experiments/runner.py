@@ -14,11 +14,14 @@ second fails with a one-line error naming the run directory (and the jobs it has
 
 from __future__ import annotations
 
+import contextlib
 import fnmatch
 import json
+import logging
 import os
 import re
 import shutil
+import signal
 import sys
 import time
 from collections.abc import Callable
@@ -34,7 +37,14 @@ from hrlp.arm.research.imitate import ImitationConfig
 from hrlp.atomic import LOCK_FILE, atomic_path, directory_lock
 from hrlp.checkpoint import checkpoint_exists
 from hrlp.experiments.presets import PRESETS, Preset
-from hrlp.stopping import Stopped, children_ignore_stop_signals, ignore_stop_signals
+from hrlp.stopping import (
+    STOP_SIGNALS,
+    Stopped,
+    as_stop,
+    children_ignore_stop_signals,
+    ignore_stop_signals,
+    raise_if_stopping,
+)
 from hrlp.train import TrainConfig
 from hrlp.training.sources import resolve_skills
 
@@ -248,6 +258,53 @@ def kill_pool(pool: ProcessPoolExecutor) -> None:
         proc.join(timeout=10)
 
 
+#: How long the driver waits on Ray at a time (s): between waits a stop signal is acted on.
+RAY_WAIT_S = 0.5
+
+
+def _on_ray(jobs: list[Job], reuse: bool, address: str | None,
+            on_result: Callable[[dict[str, Any]], None] | None) -> list[dict[str, Any]]:  # fmt: skip
+    """Run ``jobs`` as Ray tasks of one CPU each, on the cluster at ``address`` or on a local instance started here
+    (and shut down after). A stop signal cancels the tasks still running (their runs keep their last checkpoints, whole
+    whenever the kill comes) and is raised here, as with the process backend."""
+    import ray
+
+    local = address is None and not ray.is_initialized()
+    handlers = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    try:
+        with children_ignore_stop_signals():  # a local instance's processes start with the stop signals held back
+            ray.init(address=address, ignore_reinit_error=True, include_dashboard=False, log_to_driver=False,
+                     logging_level=logging.ERROR)  # fmt: skip
+    finally:
+        for s, handler in handlers.items():  # ray.init sets its own SIGTERM handler in the driver (sys.exit)
+            signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+    results: list[dict[str, Any]] = []
+    pending: dict[Any, Job] = {}
+    try:
+        remote = ray.remote(num_cpus=1)(run_job)
+        pending = {remote.remote(j, reuse): j for j in jobs}
+        while pending:  # waits of RAY_WAIT_S: a blocking wait runs in Ray's C++ and would leave a signal unseen
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=RAY_WAIT_S)
+            raise_if_stopping()
+            for ref in ready:
+                pending.pop(ref)
+                results.append(res := ray.get(ref))
+                if on_result:
+                    on_result(res)
+    except BaseException as error:
+        for ref in pending:  # the runs in progress keep their last checkpoints; the next reproduce resumes them
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
+        stop = as_stop(error)
+        if stop is not None and stop is not error:
+            raise stop from None
+        raise
+    finally:
+        if local:
+            ray.shutdown()
+    return results
+
+
 def reproduce(
     preset_name: str | Preset,
     out: Path = Path("runs/reproduce"),
@@ -295,19 +352,7 @@ def reproduce(
         resolve_skills(spec.skills, spec.library)  # a missing skill fails now
     results: list[dict[str, Any]] = []
     if backend == "ray":
-        import ray
-
-        ray.init(address=address, ignore_reinit_error=True, include_dashboard=False, log_to_driver=False)
-        remote = ray.remote(num_cpus=1)(run_job)
-        pending = {remote.remote(j, reuse): j for j in jobs}
-        while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
-            res = ray.get(ready[0])
-            pending.pop(ready[0])
-            results.append(res)
-            if on_result:
-                on_result(res)
-        return results
+        return _on_ray(jobs, reuse, address, on_result)
     with process_pool(workers) as pool:
         futures = []
         try:
