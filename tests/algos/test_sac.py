@@ -16,6 +16,7 @@ from hrlp.cli import app
 from hrlp.config import MacroSpec, SACConfig, TrainConfig
 from hrlp.policies.sac import SACActor, TwinQ
 from hrlp.train import train
+from hrlp.training.offpolicy import OffPolicyTrainer
 
 
 def test_the_hybrid_update_learns_the_best_choice_and_its_parameter():
@@ -87,8 +88,6 @@ def test_a_manager_sac_run_resumes_exactly(tmp_path):
 
 
 def test_goals_are_relabelled_on_a_goal_conditioned_environment_for_flat_runs_and_managers(tmp_path):
-    from hrlp.training.offpolicy import OffPolicyTrainer
-
     sac = SACConfig(batch_size=32, learning_starts=16, hidden=(16,))
     flat = OffPolicyTrainer(TrainConfig(task="goal_envs:PointGoal-v0", algo="sac", sac=sac, num_envs=2,
                                         batch_steps=40, seed=0))  # fmt: skip
@@ -134,3 +133,13 @@ def test_a_discrete_space_goes_through_the_same_learner(tmp_path):
     last = list(train(cfg, tmp_path / "cartpole"))[-1]
     assert last["sac/gradient_steps"] == 100 and np.isfinite(last["sac/critic_loss"])
     assert last["sac/params_log_prob"] == 0 and last["sac/alpha_params"] == pytest.approx(0.1)  # no parameters to tune
+
+
+def test_a_manager_whose_skill_is_framed_on_the_goal_is_refused_relabelling_in_one_line():
+    # near_goal's parameters are offsets from desired_goal: a relabelled goal would move where its past decisions aimed.
+    macro = MacroSpec(skills=("goal_envs:near_goal",))
+    cfg = TrainConfig(task="goal_envs:PointGoal-v0", algo="sac", macro=macro, num_envs=2, batch_steps=16)
+    with pytest.raises(ValueError, match=r"^skill near_goal \(frame desired_goal\): its parameters are offsets from the "
+                       r"desired goal.*--sac-her-future 0"):  # fmt: skip
+        OffPolicyTrainer(cfg)
+    assert not OffPolicyTrainer(dataclasses.replace(cfg, sac=SACConfig(her_future=0))).relabels

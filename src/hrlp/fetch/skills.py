@@ -5,8 +5,8 @@
 * ``grasp``: goes over the object, descends onto it and closes the fingers; no parameters. Scripted.
 * ``carry``: moves the gripper to a point in the workspace (m, world frame), fingers held closed, carrying what they
   hold. Trained by Stable-Baselines3 (SAC + HER on FetchReach-v4), shipped as its ``.zip``.
-* ``push``: pushes the object along the table toward a point (x, y; m, an offset from the task's goal, ``goal_xy``):
-  round behind it, lifted, then down and through. Scripted.
+* ``push``: pushes the object along the table toward a point (x, y; m, world frame): round behind it, lifted, then
+  down and through. Scripted.
 
 Each is a :class:`~hrlp.skills.core.Skill` reading the parts :mod:`hrlp.fetch` names (``grip_pos``, ``object_pos``,
 ``gripper_state``, ...), so one definition serves FetchPush, FetchPickAndPlace and FetchSlide. Use them by reference,
@@ -40,8 +40,6 @@ HALF_OBJECT = 0.025
 OPEN, CLOSED = 1.0, -1.0
 #: How high above the object's centre the closed fingers push it (m), and at most how fast (action units).
 PUSH_HEIGHT, PUSH_SPEED = 0.0, 0.3
-#: How far from the task's goal the push may aim (m): the Manager learns where to aim near it.
-AIM_M = 0.1
 #: What FetchReach's blocked fingers always read: its policies see them so wherever they run (:class:`Seeing`); shown
 #: the fingers as they are (open, 0.05 m each), hrlp's reach stopped 8.5 to 10.9 cm from its points instead of 0.2 to 1.1 cm.
 BLOCKED_FINGERS = {"gripper_state": (0.0, 0.0), "gripper_vel": (0.0, 0.0)}
@@ -115,8 +113,7 @@ def _push_act(obs: ObsView, params: np.ndarray) -> np.ndarray:
 
 #: Pushes the object along the table toward a point: goes round behind it (lifted), lowers, and pushes through (scripted).
 push = ScriptedSkill(
-    "push", ParamBox((-AIM_M, -AIM_M), (AIM_M, AIM_M), "point to push the object to (x, y), offset from the goal (m)",
-                     frame="goal_xy"), _push_act,
+    "push", ParamBox(WORKSPACE_LOW[:2], WORKSPACE_HIGH[:2], "point to push the object to (x, y), metres"), _push_act,
     reads=("grip_pos", "object_pos"), k=25,
     done=lambda obs, p: np.linalg.norm(obs["object_pos"][:, :2] - p, axis=1) < 0.02,
 )  # fmt: skip

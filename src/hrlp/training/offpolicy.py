@@ -31,7 +31,7 @@ from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
 from hrlp.training.loading import check_action_units, iteration_stats, run_meta
 
-__all__ = ["GOAL_KEYS", "OffPolicyTrainer", "goal_spec"]
+__all__ = ["GOAL_KEYS", "OffPolicyTrainer", "goal_framed_skills", "goal_spec"]
 
 GOAL_KEYS = ("achieved_goal", "desired_goal", "observation")
 """The keys of a goal-conditioned environment's Dict observation (Gymnasium-Robotics' ``GoalEnv``)."""
@@ -56,6 +56,18 @@ def goal_spec(env: gym.Env) -> GoalSpec | None:
     return None
 
 
+def goal_framed_skills(env: MacroEnv, desired: slice) -> list[str]:
+    """The skills of ``env`` whose parameters are offsets from a part that lies in the desired goal's numbers
+    (``desired``): relabelling a decision's goal would change what its parameters meant."""
+    out = []
+    for skill in env.skills:
+        if skill.params.frame is not None:
+            frame = env.layout.span(skill.params.frame)
+            if max(frame.start, desired.start) < min(frame.stop, desired.stop):
+                out.append(f"{skill.name} (frame {skill.params.frame})")
+    return out
+
+
 class OffPolicyTrainer:
     """SAC on one task, flat or Manager: owns the actor, the critics (in :class:`~hrlp.algos.sac.SACUpdate`), the
     normaliser, the replay buffer and a :class:`~hrlp.rollout.Sampler` in this process."""
@@ -71,6 +83,11 @@ class OffPolicyTrainer:
         self.policy = SACActor(obs_dim, probe.action_space, cfg.sac.hidden)
         self.critic = TwinQ(obs_dim, self.policy.param_dims, cfg.sac.hidden)
         goals = goal_spec(probe) if cfg.sac.her_future > 0 else None
+        if goals is not None and isinstance(probe, MacroEnv) and (framed := goal_framed_skills(probe, goals.desired)):
+            probe.close()
+            raise ValueError(f"skill {', '.join(framed)}: its parameters are offsets from the desired goal, which relabelled "
+                             "goals (HER) replace, changing what past parameters meant; give --sac-her-future 0, or "
+                             "parameters in a frame outside the goal")  # fmt: skip
         self._scorer = probe if goals is not None else None  # compute_reward is the probe's: it stays open
         if self._scorer is None:
             probe.close()
