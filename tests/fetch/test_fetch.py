@@ -1,6 +1,7 @@
 """The Fetch domain on Gymnasium-Robotics' own Fetch tasks (real MuJoCo physics): the parts hrlp names in its
 observation, each of the four skills (a policy hrlp trained, one Stable-Baselines3 trained, two scripted) doing what it
-says, and a Manager over them trained and evaluated through the command line.
+says (strike included: the puck slides toward its point), and a Manager over them trained and evaluated through the
+command line.
 
 Gymnasium-Robotics 1.4.2's Fetch fails at reset from mujoco 3.12 on (an assertion on a joint type), so these tests run
 where the ``fetch`` extra's stack is installed (mujoco 3.3 to 3.11) and are skipped, saying so, elsewhere."""
@@ -18,6 +19,7 @@ from hrlp.evaluate import evaluate_run
 from hrlp.fetch import OBJECT_PARTS, REACH_PARTS
 from hrlp.skills.core import ObsLayout, ObsView
 from hrlp.skills.macro_env import MacroEnv
+from hrlp.training.sources import resolve_skills
 
 pytest.importorskip("gymnasium_robotics")
 if tuple(int(v) for v in mujoco.__version__.split(".")[:2]) >= (3, 12):
@@ -87,6 +89,23 @@ def test_push_moves_the_object_to_the_goal_on_the_table():
             done = term or trunc
         succeeded.append(info["is_success"])
     assert np.mean(succeeded) >= 0.75, succeeded  # pushed at the goal from every decision: 18/20 on mujoco 3.11, 16/20 on 3.3
+
+
+def test_strike_slides_the_puck_toward_its_point_and_each_reference_is_a_skill_of_its_own():
+    (a,), (b,) = resolve_skills(["hrlp.fetch.skills:strike"]), resolve_skills(["hrlp.fetch.skills:strike"])
+    assert isinstance(a, fs.Strike) and a is not b  # each Manager keeps its own worlds' strike state
+    m = MacroEnv(gym.make("gymnasium_robotics:FetchSlide-v4"), [a])
+    moved, aligned = [], []
+    for seed in range(5):
+        obs, _ = m.reset(seed=seed)
+        view = ObsView(obs[None], m.layout, np.array([0]))
+        start, goal = view["object_pos"][0, :2], view["desired_goal"][0, :2]
+        for _ in range(2):  # the run-up and the strike
+            obs, *_ = _decide(m, 0, np.array([*goal, 0.6]))
+        d = ObsView(obs[None], m.layout, np.array([0]))["object_pos"][0, :2] - start
+        moved.append(np.linalg.norm(d))
+        aligned.append(d @ (goal - start) / (np.linalg.norm(d) * np.linalg.norm(goal - start) + 1e-9))
+    assert np.median(moved) > 0.05 and np.median(aligned) > 0.9, (moved, aligned)
 
 
 def test_a_manager_over_the_fetch_skills_trains_and_evaluates_through_the_command_line(tmp_path):

@@ -169,8 +169,10 @@ class Strike(Skill):
         return out
 
 
-#: An instance for ``--skills hrlp.fetch.skills:strike`` (it keeps each world's strike state).
-strike = Strike()
+def strike() -> Skill:
+    """A new :class:`Strike` (``--skills hrlp.fetch.skills:strike``): each keeps its own worlds' strike state, so two
+    Managers in one process never share it."""
+    return Strike()
 
 
 def reach() -> Skill:
