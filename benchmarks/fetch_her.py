@@ -16,8 +16,9 @@ Methods (``--methods``, comma-separated):
 Each run trains for ``--steps`` low-level steps; whenever it passes a multiple of ``--eval-every`` steps its greedy
 policy is evaluated on ``--eval-episodes`` episodes (seeds 10,000 + i) and the success rate recorded. One torch thread
 per run. Results are written to ``--out`` (JSON) after every finished run, and a run already there is skipped: an
-interrupted benchmark continues where it stopped when started again with the same ``--out``. Needs the ``fetch`` extra
-(``pip install "hrlp[fetch]"``: gymnasium-robotics and a MuJoCo it runs on).
+interrupted benchmark continues where it stopped when started again with the same ``--out``; with a ``--workdir``, an
+hrlp run stopped part-way continues from its last checkpoint and evaluations (``curve.json`` in its directory).
+Needs the ``fetch`` extra (``pip install "hrlp[fetch]"``: gymnasium-robotics and a MuJoCo it runs on).
 
     python benchmarks/fetch_her.py --task PickAndPlace --methods manager,sb3 --steps 100000 --seeds 3 \\
         --out docs/results/fetch-pickandplace.json
@@ -59,15 +60,23 @@ def hrlp_config(task: str, method: str, seed: int, steps: int) -> Any:
 
 
 def hrlp_run(task: str, method: str, seed: int, steps: int, eval_every: int, eval_episodes: int, workdir: Path) -> dict:
-    """Train with hrlp; the greedy success every ``eval_every`` steps."""
+    """Train with hrlp; the greedy success every ``eval_every`` steps. A run stopped part-way (its directory under
+    ``workdir`` holds a checkpoint and ``curve.json``, the evaluations so far) continues from its last checkpoint."""
+    from hrlp.atomic import atomic_path
+    from hrlp.checkpoint import checkpoint_exists
     from hrlp.evaluate import evaluate_run
     from hrlp.train import train
 
     run_dir = workdir / f"{method}-{seed}"
-    curve: list[tuple[int, float]] = []
-    mark = eval_every
-    t0 = time.perf_counter()
-    for stats in train(hrlp_config(task, method, seed, steps), run_dir, on_warning=lambda message: None):
+    sidecar = run_dir / "curve.json"
+    resume = checkpoint_exists(run_dir / "checkpoint") and sidecar.exists()
+    so_far = json.loads(sidecar.read_text()) if resume else {"curve": [], "wall_s": 0.0}
+    curve: list[tuple[int, float]] = [tuple(c) for c in so_far["curve"]]
+    if resume:
+        print(f"  {task} {method} seed {seed}: continuing {run_dir} ({len(curve)} evaluations so far)", flush=True)
+    mark = (curve[-1][0] // eval_every + 1) * eval_every if curve else eval_every
+    t0, before = time.perf_counter(), float(so_far["wall_s"])
+    for stats in train(hrlp_config(task, method, seed, steps), run_dir, resume=resume, on_warning=lambda message: None):
         done = int(stats["env_steps"])
         if done >= mark or done >= steps:
             ev = evaluate_run(run_dir, episodes=eval_episodes)
@@ -75,7 +84,9 @@ def hrlp_run(task: str, method: str, seed: int, steps: int, eval_every: int, eva
             curve.append((done, ev.success.mean))
             print(f"  {task} {method} seed {seed}: {done:,} steps, greedy success {ev.success.mean:.2f}", flush=True)
             mark = (done // eval_every + 1) * eval_every
-    return {"curve": curve, "wall_s": time.perf_counter() - t0}
+            with atomic_path(sidecar) as tmp:
+                tmp.write_text(json.dumps({"curve": curve, "wall_s": before + time.perf_counter() - t0}))
+    return {"curve": curve, "wall_s": before + time.perf_counter() - t0}
 
 
 def sb3_greedy_success(model: Any, env: Any, episodes: int) -> float:

@@ -42,6 +42,17 @@ def test_fetch_her_runs_each_method_writes_its_results_and_skips_finished_runs_a
     assert _run("benchmarks/fetch_report.py", str(out), "--out", str(page)).returncode == 2  # never overwrites unasked
 
 
+def test_an_hrlp_run_stopped_part_way_continues_from_its_checkpoint_and_its_evaluations(tmp_path):
+    base = ("benchmarks/fetch_her.py", "--task", "Push", "--methods", "sac", "--seeds", "1", "--eval-every", "2000",
+            "--eval-episodes", "2", "--workdir", str(tmp_path / "runs"))  # fmt: skip
+    first = _run(*base, "--steps", "2000", "--out", str(tmp_path / "a.json"))  # as a run stopped after 2,000 steps leaves it
+    assert first.returncode == 0, first.stderr[-3000:]
+    later = _run(*base, "--steps", "4000", "--out", str(tmp_path / "b.json"))
+    assert later.returncode == 0, later.stderr[-3000:]
+    assert "continuing" in later.stdout and "2,000 steps, greedy success" not in later.stdout, later.stdout
+    assert [s for s, _ in json.loads((tmp_path / "b.json").read_text())["runs"]["sac-0"]["curve"]] == [2000, 4000]
+
+
 def test_fetch_speed_compares_hrlp_and_sb3_sampling():
     r = _run("benchmarks/fetch_speed.py", "--task", "Push", "--num-envs", "2", "--steps", "200")
     assert r.returncode == 0, r.stderr[-2000:]
