@@ -88,7 +88,7 @@ def test_push_moves_the_object_to_the_goal_on_the_table():
             obs, _, term, trunc, info = _decide(m, 0, goal)
             done = term or trunc
         succeeded.append(info["is_success"])
-    assert np.mean(succeeded) >= 0.75, succeeded  # pushed at the goal from every decision: 18/20 on mujoco 3.11, 16/20 on 3.3
+    assert np.mean(succeeded) >= 0.85, succeeded  # over seeds 0-99: 0.97 on mujoco 3.11, 0.95 on 3.3.7
 
 
 def test_strike_slides_the_puck_toward_its_point_and_each_reference_is_a_skill_of_its_own():

@@ -40,6 +40,8 @@ HALF_OBJECT = 0.025
 OPEN, CLOSED = 1.0, -1.0
 #: How high above the object's centre the closed fingers push it (m), and at most how fast (action units).
 PUSH_HEIGHT, PUSH_SPEED = 0.0, 0.3
+#: Within this distance of its point (m) the object is pushed: the push ends, and a push begun there stays still.
+PUSHED_M = 0.02
 #: What FetchReach's blocked fingers always read: its policies see them so wherever they run (:class:`Seeing`); shown
 #: the fingers as they are (open, 0.05 m each), hrlp's reach stopped 8.5 to 10.9 cm from its points instead of 0.2 to 1.1 cm.
 BLOCKED_FINGERS = {"gripper_state": (0.0, 0.0), "gripper_vel": (0.0, 0.0)}
@@ -106,7 +108,7 @@ def _push_act(obs: ObsView, params: np.ndarray) -> np.ndarray:
     out = np.empty((len(grip), 4))
     out[:, :3] = _toward(target, grip)
     out[pushing, :3] = np.clip(out[pushing, :3], -PUSH_SPEED, PUSH_SPEED)  # slowly: a pushed cube slides on
-    out[(dist[:, 0] < 0.015) & low, :3] = 0.0  # there: stay still rather than push it past
+    out[dist[:, 0] < PUSHED_M, :3] = 0.0  # there: stay still rather than go round it again and knock it off
     out[:, 3] = CLOSED
     return out
 
@@ -115,7 +117,7 @@ def _push_act(obs: ObsView, params: np.ndarray) -> np.ndarray:
 push = ScriptedSkill(
     "push", ParamBox(WORKSPACE_LOW[:2], WORKSPACE_HIGH[:2], "point to push the object to (x, y), metres"), _push_act,
     reads=("grip_pos", "object_pos"), k=25,
-    done=lambda obs, p: np.linalg.norm(obs["object_pos"][:, :2] - p, axis=1) < 0.02,
+    done=lambda obs, p: np.linalg.norm(obs["object_pos"][:, :2] - p, axis=1) < PUSHED_M,
 )  # fmt: skip
 
 
