@@ -1,7 +1,8 @@
 """Write ``docs/results/fetch.md`` from the JSON files ``benchmarks/fetch_her.py`` wrote: per task and method, the final
 greedy success pooled over seeds (Wilson 95% interval over all final evaluation episodes), each seed's figure, the
 environment steps to a greedy success of 0.9 (the Manager's with its skills' own training added), wall time, and the
-rl-baselines3-zoo's published figures beside them; every target of the Fetch issue is said met or not met.
+rl-baselines3-zoo's published figures beside them, a section per task and budget; every target of the Fetch issue is said
+met or not met.
 
     python benchmarks/fetch_report.py docs/results/fetch-*.json --out docs/results/fetch.md [--overwrite]
 """
@@ -87,7 +88,8 @@ def report(results: list[dict[str, Any]]) -> str:
            "work).", ""]  # fmt: skip
     for res in results:
         task = res["task"]
-        out += [f"## Fetch{task}-v4", "", f"Budget {res['steps']:,} environment steps per run, greedy evaluation every "
+        out += [f"## Fetch{task}-v4, {res['steps']:,} steps", "",
+                f"Budget {res['steps']:,} environment steps per run, greedy evaluation every "
                 f"{res['eval_every']:,} steps on {res['eval_episodes']} episodes. The Manager's learned skills took "
                 f"{res['skill_steps']:,} steps of their own. Published: {ZOO[task]}.", "",
                 "| method | seeds | final greedy success [95%] | per seed | steps to 0.9 | with skills | core-hours |",
@@ -104,19 +106,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.out.exists() and not args.overwrite:
         print(f"{args.out} exists; give --overwrite to replace it", file=sys.stderr)
         return 2
-    merged: dict[str, dict[str, Any]] = {}
+    merged: dict[tuple, dict[str, Any]] = {}  # one task's methods may come from several files of the same budget
     for path in args.results:
         res = json.loads(path.read_text())
-        if res["task"] in merged:  # one task's methods may come from several files (same budget and evaluation)
-            base = merged[res["task"]]
-            if (base["steps"], base["eval_every"], base["eval_episodes"]) != (res["steps"], res["eval_every"],
-                                                                                 res["eval_episodes"]):  # fmt: skip
-                print(f"{path}: another budget or evaluation than the other Fetch{res['task']} results", file=sys.stderr)
-                return 2
-            base["runs"].update(res["runs"])
+        key = (res["task"], res["steps"], res["eval_every"], res["eval_episodes"])
+        if key in merged:
+            merged[key]["runs"].update(res["runs"])
         else:
-            merged[res["task"]] = res
-    args.out.write_text(report([merged[t] for t in ("PickAndPlace", "Push", "Slide") if t in merged]))
+            merged[key] = res
+    order = sorted(merged, key=lambda k: (("PickAndPlace", "Push", "Slide").index(k[0]), k[1]))
+    args.out.write_text(report([merged[k] for k in order]))
     print(f"written {args.out}")
     return 0
 
