@@ -61,7 +61,7 @@ def hrlp_config(task: str, method: str, seed: int, steps: int) -> Any:
 
 def hrlp_run(task: str, method: str, seed: int, steps: int, eval_every: int, eval_episodes: int, workdir: Path) -> dict:
     """Train with hrlp; the greedy success every ``eval_every`` steps. A run stopped part-way (its directory under
-    ``workdir`` holds a checkpoint and ``curve.json``, the evaluations so far) continues from its last checkpoint."""
+    ``workdir`` holds a checkpoint, and ``curve.json`` the evaluations so far) continues from its last checkpoint."""
     from hrlp.atomic import atomic_path
     from hrlp.checkpoint import checkpoint_exists
     from hrlp.evaluate import evaluate_run
@@ -69,8 +69,8 @@ def hrlp_run(task: str, method: str, seed: int, steps: int, eval_every: int, eva
 
     run_dir = workdir / f"{method}-{seed}"
     sidecar = run_dir / "curve.json"
-    resume = checkpoint_exists(run_dir / "checkpoint") and sidecar.exists()
-    so_far = json.loads(sidecar.read_text()) if resume else {"curve": [], "wall_s": 0.0}
+    resume = checkpoint_exists(run_dir / "checkpoint")  # stopped before its first evaluation: no curve.json yet
+    so_far = json.loads(sidecar.read_text()) if resume and sidecar.exists() else {"curve": [], "wall_s": 0.0}
     curve: list[tuple[int, float]] = [tuple(c) for c in so_far["curve"]]
     if resume:
         print(f"  {task} {method} seed {seed}: continuing {run_dir} ({len(curve)} evaluations so far)", flush=True)
