@@ -186,6 +186,10 @@ class Sampler:
         self.last_raw_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations of the last batch
         self.last_raw_next_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations each step produced
         self.last_tau: np.ndarray | None = None  # [T, N] low-level steps of each decision
+        self.last_path: np.ndarray | None = None  # [T, N, K, obs_dim] a Manager's observations inside each decision
+        self.keep_paths = False
+        """Whether :meth:`collect` keeps a Manager's observations inside each decision in :attr:`last_path` (off-policy goal
+        relabelling reads them; a large on-policy batch need not hold them)."""
         self._requested: int | None = None
 
     @property
@@ -220,6 +224,7 @@ class Sampler:
         raw_buf = np.empty((steps_per_env, n, dim))
         raw_next = np.empty((steps_per_env, n, dim))
         tau_buf = np.empty((steps_per_env, n), dtype=np.int64)
+        path_buf: np.ndarray | None = None
         env_steps = 0
         physics = 0.0
         act = self.policy.numpy_actor()  # the weights stay fixed during a batch
@@ -260,11 +265,15 @@ class Sampler:
                                  episode_steps)  # fmt: skip
             next_buf[t] = self.normalizer.normalize(step.next_obs)
             raw_next[t], tau_buf[t] = step.next_obs, step.tau
+            if step.path is not None and self.keep_paths:
+                if path_buf is None:
+                    path_buf = np.empty((steps_per_env, *step.path.shape))
+                path_buf[t] = step.path
             self.timing.inference += t1 - t0
             self.timing.env += t2 - t1
         assert actions_buf is not None
         self.timing.physics += physics
-        self.last_raw_obs, self.last_raw_next_obs, self.last_tau = raw_buf, raw_next, tau_buf
+        self.last_raw_obs, self.last_raw_next_obs, self.last_tau, self.last_path = raw_buf, raw_next, tau_buf, path_buf
         if not self.normalizer.frozen:
             self.normalizer.update(raw_buf.reshape(-1, dim))
         f32 = torch.float32

@@ -109,3 +109,61 @@ def test_memory_is_stated_per_transition_and_a_million_manager_decisions_fit_in_
     assert b.nbytes() == 1000 * (4 * (2 * 24 + 10 + 2) + 11)
     # The arm's Manager with gripper, reacher and the micro-action: 24 observation numbers, actions [k, 3 + 9 parameters].
     assert ReplayBuffer(1_000_000, 4, 24, 13, GAMMA).nbytes() == 263_000_000 < 2 * 2**30
+
+
+def _fill_paths(buffer, steps, tau=3, k=4, path=True):
+    """Like :func:`_fill` with one environment and macro-transitions of ``tau`` low-level steps: within row ``t`` the
+    achieved goal moves from ``t - 1`` to ``t`` in ``tau`` equal steps (rows past ``tau`` repeat ``t``)."""
+    for t in range(steps):
+        obs = np.array([[t - 1, 0, -1, -1, t]], float)
+        nxt = obs.copy()
+        nxt[0, 0] = t
+        inside = np.repeat(nxt[:, None], k, axis=1)
+        inside[0, :tau, 0] = t - 1 + np.arange(1, tau + 1) / tau
+        buffer.add(obs, nxt, np.full((1, 1), t), np.full(1, -1.0), np.full(1, GAMMA**tau), np.zeros(1, bool),
+                   np.array([(t + 1) % 5 == 0]), np.full(1, tau), inside if path else None)  # fmt: skip
+
+
+def test_a_relabelled_macro_transition_is_scored_at_each_of_its_low_level_steps():
+    b = ReplayBuffer(100, 1, 5, 1, GAMMA, _goals(), her_future=1000, path_len=4)
+    _fill_paths(b, 5)
+    s = b.sample(300, np.random.default_rng(3))
+    reached = s["obs"][:, 2] == s["obs"][:, 4]  # its own end: reached only at its third and last step
+    later = (s["obs"][:, 2] != -1) & ~reached
+    assert reached.sum() > 30 and later.sum() > 30
+    assert np.allclose(s["rewards"][reached], -(1 + GAMMA))  # the fourth row repeats the end and is not counted
+    assert np.allclose(s["rewards"][later], -(1 + GAMMA + GAMMA**2))
+    # Without the steps the end state stands for each of them: the same goal scores as if held throughout.
+    end_only = ReplayBuffer(100, 1, 5, 1, GAMMA, _goals(), her_future=1000)
+    _fill_paths(end_only, 5, path=False)
+    s = end_only.sample(300, np.random.default_rng(3))
+    assert np.allclose(s["rewards"][s["obs"][:, 2] == s["obs"][:, 4]], 0.0)
+
+
+def test_relabelled_rewards_are_scaled_like_the_stored_ones():
+    b = ReplayBuffer(100, 1, 5, 1, GAMMA, _goals(), her_future=1000, path_len=4, reward_scale=10.0)
+    _fill_paths(b, 5)
+    s = b.sample(300, np.random.default_rng(3))
+    reached = s["obs"][:, 2] == s["obs"][:, 4]
+    assert reached.any() and np.allclose(s["rewards"][reached], -10 * (1 + GAMMA))
+
+
+def test_a_macro_path_of_the_wrong_shape_is_refused_in_one_line():
+    b = ReplayBuffer(100, 1, 5, 1, GAMMA, _goals(), her_future=4, path_len=4)
+    with pytest.raises(ValueError, match=r"path has shape \[1, 3, 5\], expected \[1, 4, 5\]"):
+        b.add(np.zeros((1, 5)), np.zeros((1, 5)), np.zeros((1, 1)), np.zeros(1), np.ones(1), np.zeros(1, bool),
+              np.zeros(1, bool), np.ones(1), np.zeros((1, 3, 5)))  # fmt: skip
+
+
+def test_paths_survive_the_saved_state_and_a_state_saved_without_them_scores_by_end_states():
+    a = ReplayBuffer(100, 1, 5, 1, GAMMA, _goals(), her_future=1000, path_len=4)
+    _fill_paths(a, 7)
+    tensors, meta = a.state()
+    b = ReplayBuffer(100, 1, 5, 1, GAMMA, _goals(), her_future=1000, path_len=4)
+    b.load_state(tensors, meta)
+    x, y = a.sample(64, np.random.default_rng(5)), b.sample(64, np.random.default_rng(5))
+    assert all(np.array_equal(x[k], y[k]) for k in x)
+    old = {name: t for name, t in tensors.items() if name != "replay.path"}  # a checkpoint of an earlier version
+    c = ReplayBuffer(100, 1, 5, 1, GAMMA, _goals(), her_future=1000, path_len=4)
+    c.load_state(old, meta)
+    assert np.array_equal(c.path[:7, 0, :, 0], np.repeat(np.arange(7.0)[:, None], 4, axis=1))

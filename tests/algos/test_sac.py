@@ -143,3 +143,27 @@ def test_a_manager_whose_skill_is_framed_on_the_goal_is_refused_relabelling_in_o
                        r"desired goal.*--sac-her-future 0"):  # fmt: skip
         OffPolicyTrainer(cfg)
     assert not OffPolicyTrainer(dataclasses.replace(cfg, sac=SACConfig(her_future=0))).relabels
+
+
+def test_a_managers_buffer_keeps_the_goal_achieved_after_each_low_level_step_of_its_decisions():
+    sac = SACConfig(batch_size=16, learning_starts=8, hidden=(16,))
+    macro = MacroSpec(skills=("goal_envs:reach",), k=6)
+    manager = OffPolicyTrainer(TrainConfig(task="goal_envs:PointGoal-v0", algo="sac", sac=sac, macro=macro, num_envs=2,
+                                           batch_steps=16, seed=0))  # fmt: skip
+    try:
+        manager.iterate()
+        b = manager.buffer
+        assert b.goals is not None and b.path is not None and b.path.shape[2:] == (6, 2)
+        held = min(b.written, b.rows)
+        tau, path = b.tau[:held].astype(int), b.path[:held]
+        end = b.next_obs[:held, :, b.goals.achieved]
+        start = b.obs[:held, :, b.goals.achieved]
+        rows, envs = np.indices(tau.shape)
+        assert np.array_equal(path[rows, envs, tau - 1], end)  # the last step taken is where the decision ended
+        for j in range(6):  # past tau, the end repeats
+            past = tau <= j
+            assert np.array_equal(path[:, :, j][past], end[past])
+        first_moved = np.linalg.norm(path[:, :, 0] - start, axis=-1)
+        assert ((first_moved > 0) & (first_moved < np.linalg.norm(end - start, axis=-1))).mean() > 0.5  # steps in between
+    finally:
+        manager.close()

@@ -13,9 +13,11 @@ Goal relabelling (HER, Andrychowicz et al. 2017, the ``future`` strategy) applie
 goal-conditioned (:class:`GoalSpec`): a share ``her_future / (her_future + 1)`` of each minibatch gets, in place of
 its desired goal, the goal achieved after a transition drawn uniformly from itself to the end of its episode (so
 far, for an episode still running), and the reward the environment's ``compute_reward`` gives for it. A Manager's
-macro-transition is relabelled with the goal achieved at its end, and its reward is that of its end state times the
-discounts it spans, ``sum_{j < tau} gamma^j``: the environment scores each low-level step, and the buffer keeps only
-where the macro-action ended.
+macro-transition is relabelled with the goal achieved at its end; its reward is that of every low-level step inside
+it, ``sum_{j < tau} gamma^j r(achieved_j, goal)``, from the achieved goals of those steps, which the buffer keeps
+(``path_len`` of them per transition, ``4 path_len G`` bytes for a ``G``-number goal). Without them (``path_len`` 0)
+the end state stands for every step, ``r(achieved_tau, goal) sum_{j < tau} gamma^j``, which scores a macro-action that
+reaches the goal only at its last step as if it had been there throughout.
 """
 
 from __future__ import annotations
@@ -60,14 +62,19 @@ class ReplayBuffer:
         gamma: the low-level discount (for a relabelled macro-transition's reward).
         goals: the environment's goals (None: no relabelling).
         her_future: relabelled goals per real one (0: none).
+        path_len: a Manager's longest macro-action, in low-level steps: the achieved goals of its steps are kept to
+            score a relabelled macro-transition step by step (0: scored by its end state; used only with ``goals``).
+        reward_scale: the factor the stored rewards were multiplied by, applied to relabelled rewards alike.
     """
 
     def __init__(self, capacity: int, num_envs: int, obs_dim: int, act_dim: int, gamma: float,
-                 goals: GoalSpec | None = None, her_future: int = 4) -> None:  # fmt: skip
+                 goals: GoalSpec | None = None, her_future: int = 4, path_len: int = 0,
+                 reward_scale: float = 1.0) -> None:  # fmt: skip
         if capacity < 1 or num_envs < 1:
             raise ValueError(f"a replay buffer needs capacity and num_envs >= 1, got {capacity} and {num_envs}")
         self.rows, self.num_envs, self.gamma = math.ceil(capacity / num_envs), num_envs, float(gamma)
         self.goals, self.her_future = goals, int(her_future) if goals is not None else 0
+        self.reward_scale = float(reward_scale)
         r, n = self.rows, num_envs
         self.obs = np.zeros((r, n, obs_dim), np.float32)
         self.next_obs = np.zeros((r, n, obs_dim), np.float32)
@@ -83,6 +90,12 @@ class ReplayBuffer:
         """Rows written so far (absolute); the row of the next :meth:`add` is ``written % rows``."""
         self.current_start = np.zeros(n, np.int64)
         """Per environment, the absolute row where its running episode started."""
+        self.path: np.ndarray | None = None
+        """``[rows, N, path_len, G]``: the goal achieved after each low-level step of a macro-transition (rows past its
+        ``tau`` repeat its last); None unless relabelling with ``path_len`` > 0."""
+        if self.her_future > 0 and goals is not None and path_len > 0:
+            g = goals.achieved.stop - goals.achieved.start
+            self.path = np.zeros((r, n, int(path_len), g), np.float32)
 
     @property
     def size(self) -> int:
@@ -91,15 +104,32 @@ class ReplayBuffer:
 
     def nbytes(self) -> int:
         """Bytes of the stored arrays (the whole capacity, allocated up front)."""
-        return sum(getattr(self, name).nbytes for name in _FIELDS)
+        return sum(getattr(self, name).nbytes for name in self._fields)
+
+    @property
+    def _fields(self) -> tuple[str, ...]:
+        return (*_FIELDS, "path") if self.path is not None else _FIELDS
 
     def add(self, obs: np.ndarray, next_obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray, discount: np.ndarray,
-            terminated: np.ndarray, done: np.ndarray, tau: np.ndarray) -> None:  # fmt: skip
+            terminated: np.ndarray, done: np.ndarray, tau: np.ndarray, path: np.ndarray | None = None) -> None:  # fmt: skip
         """One decision of every environment: raw ``obs``/``next_obs`` ``[N, D]`` (``next_obs`` the real last one where an
         episode ended), ``actions`` ``[N, A]``, ``rewards``, ``discount`` (gamma^tau), ``terminated``, ``done``
-        (terminated or truncated: the episode ended) and ``tau``, each ``[N]``."""
+        (terminated or truncated: the episode ended) and ``tau``, each ``[N]``; ``path`` ``[N, K, D]`` the raw
+        observations after each low-level step of a macro-transition, rows past ``tau`` repeating the last (kept where
+        the buffer keeps paths; None: ``next_obs`` stands for every step)."""
         row, t = self.written % self.rows, self.written
         self.obs[row], self.next_obs[row], self.actions[row] = obs, next_obs, np.asarray(actions).reshape(self.num_envs, -1)
+        if self.path is not None:
+            assert self.goals is not None
+            k = self.path.shape[2]
+            if path is None:
+                self.path[row] = np.asarray(next_obs)[:, None, self.goals.achieved]
+            else:
+                path = np.asarray(path)
+                if path.shape[:2] != (self.num_envs, k) or path.shape[2] != self.obs.shape[2]:
+                    raise ValueError(f"a macro-transition's path has shape {list(path.shape)}, expected "
+                                     f"{[self.num_envs, k, self.obs.shape[2]]}")  # fmt: skip
+                self.path[row] = path[:, :, self.goals.achieved]
         self.rewards[row], self.discount[row], self.terminated[row], self.tau[row] = rewards, discount, terminated, tau
         self.episode_end[row] = -1
         for i in np.flatnonzero(done):
@@ -145,12 +175,21 @@ class ReplayBuffer:
         obs[chosen, g.desired] = goal
         next_obs[chosen, g.desired] = goal
         achieved = next_obs[chosen, g.achieved]
-        reward = np.asarray(g.compute_reward(achieved, goal, {}), np.float64).reshape(-1)
         tau = self.tau[t % self.rows, env].astype(np.float64)
-        # sum_{j < tau} gamma^j: 1 for a flat step (tau = 1); tau itself when gamma is 1.
-        span = (1 - self.gamma**tau) / (1 - self.gamma) if self.gamma < 1 else tau
         rewards = out["rewards"].copy()
-        rewards[chosen] = reward * span
+        if self.path is not None:  # every low-level step scored: sum_{j < tau} gamma^j r(achieved_j, goal)
+            steps = self.path[t % self.rows, env]  # [B, K, G]
+            b, k, width = steps.shape
+            per_step = g.compute_reward(steps.reshape(b * k, width), np.repeat(goal, k, axis=0), {})
+            per_step = np.asarray(per_step, np.float64).reshape(b, k)
+            j = np.arange(k)
+            weights = np.where(j[None] < tau[:, None], self.gamma ** j[None], 0.0)
+            rewards[chosen] = self.reward_scale * (per_step * weights).sum(axis=1)
+        else:
+            reward = np.asarray(g.compute_reward(achieved, goal, {}), np.float64).reshape(-1)
+            # sum_{j < tau} gamma^j: 1 for a flat step (tau = 1); tau itself when gamma is 1.
+            span = (1 - self.gamma**tau) / (1 - self.gamma) if self.gamma < 1 else tau
+            rewards[chosen] = self.reward_scale * reward * span
         out["rewards"] = rewards
         if g.compute_terminated is not None:
             ended = np.broadcast_to(np.asarray(g.compute_terminated(achieved, goal, {}), np.float32), (len(chosen),))
@@ -163,7 +202,8 @@ class ReplayBuffer:
         """The rows written so far as tensors (``replay.<field>``) and the counters as JSON: a resumed buffer draws the
         same minibatches."""
         held = min(self.written, self.rows)
-        tensors = {f"replay.{name}": torch.from_numpy(np.ascontiguousarray(getattr(self, name)[:held])) for name in _FIELDS}
+        tensors = {f"replay.{name}": torch.from_numpy(np.ascontiguousarray(getattr(self, name)[:held]))
+                   for name in self._fields}  # fmt: skip
         tensors["replay.current_start"] = torch.from_numpy(self.current_start.copy())
         return tensors, {"written": self.written, "rows": self.rows, "num_envs": self.num_envs}
 
@@ -174,7 +214,11 @@ class ReplayBuffer:
                              f"this run's {self.rows} of {self.num_envs}")  # fmt: skip
         written = int(meta["written"])
         held = min(written, self.rows)
-        for name in _FIELDS:
+        for name in self._fields:
+            if name == "path" and "replay.path" not in tensors:  # saved without paths: the end state stands for each step
+                assert self.path is not None and self.goals is not None
+                self.path[:held] = self.next_obs[:held, :, None, self.goals.achieved]
+                continue
             saved = tensors[f"replay.{name}"].numpy()
             target = getattr(self, name)
             if saved.shape != (held, *target.shape[1:]):

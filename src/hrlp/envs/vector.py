@@ -59,6 +59,7 @@ class VectorStep:
     success: np.ndarray  # [N] bool: whether the episode has succeeded at any step up to and including this one
     infos: Mapping[str, np.ndarray]  # each [N]: reward terms ``reward_<term>``, ``physics_unstable``, tracked sums/maxima
     physics_seconds: float  # seconds inside MuJoCo's step during this step, all N environments together (NaN: unknown)
+    path: np.ndarray | None = None  # [N, T, obs_dim]: a Manager's observations after each low-level step (MacroStep.path)
 
     @property
     def done(self) -> np.ndarray:

@@ -458,6 +458,9 @@ class MacroStep:
     choice: np.ndarray  # [N] int, the macro-action run
     infos: list[dict[str, Any]]  # the last low-level info of each environment
     skill_done: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))  # [N] bool: ended by its done test
+    path: np.ndarray | None = None
+    """``[N, T, obs_dim]``: the observation after each low-level step, ``T`` the hierarchy's longest duration; a world's
+    rows past its ``tau`` repeat its last observation (goal relabelling scores every step of a macro-action)."""
 
 
 #: ``step(running, actions) -> (obs [M, obs_dim], rewards [M], terminated [M], truncated [M])`` for the worlds
@@ -579,6 +582,8 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
     terminated, truncated, finished = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     lows = np.zeros((n, h.action_dim))
     active = np.ones(n, dtype=bool)
+    path = np.empty((n, int(h.durations.max()), obs.shape[1]))
+    last = -1
     for j in range(int(durations.max())):
         active &= durations > j
         running = np.flatnonzero(active)
@@ -594,6 +599,7 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
                                  f"({len(idx)}, {h.action_dim}): the environment's action")  # fmt: skip
             lows[idx] = out
         obs[running], r, term, trunc = step(running, lows[running])
+        path[:, j], last = obs, j
         rewards[running] += discount[running] * r
         task_reward[running] += r
         discount[running] *= h.gamma
@@ -610,10 +616,11 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
                 stop = going[np.asarray(d, dtype=bool).reshape(len(going))]
                 finished[stop] = True
                 active[stop] = False
+    path[:, last + 1 :] = obs[:, None]
     for s, skill in enumerate(h.skills):
         if skill.cost:
             rewards[choice == s] -= skill.cost
-    return MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, [], finished)
+    return MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, [], finished, path)
 
 
 __all__ = [

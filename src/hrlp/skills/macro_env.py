@@ -482,7 +482,7 @@ class ManagerVectorEnv:
         infos = {**last, "task_reward": res.task_reward, "choice": res.choice, "skill_done": res.skill_done}
         return VectorStep(obs=obs.copy(), next_obs=next_obs, rewards=res.rewards, discount=res.discount, tau=res.tau,
                           terminated=res.terminated, truncated=res.truncated, success=success, infos=infos,
-                          physics_seconds=seconds)  # fmt: skip
+                          physics_seconds=seconds, path=res.path)  # fmt: skip
 
     def get_state(self) -> dict[str, Any]:
         """``{"envs": [{"env": world state, "obs": ..., "ran": ...}], "obs": [N, obs_dim]}``."""

@@ -95,8 +95,10 @@ class OffPolicyTrainer:
         self.sampler = Sampler([factory] * cfg.num_envs, self.policy, self.normalizer, seed=cfg.seed,
                                gamma=cfg.advantage.gamma)  # fmt: skip
         self.update = SACUpdate(self.policy, self.critic, cfg.sac, cfg.seed)
+        path_len = int(probe.hierarchy.durations.max()) if isinstance(probe, MacroEnv) and goals is not None else 0
+        self.sampler.keep_paths = path_len > 0  # a relabelled macro-transition is scored at each of its steps
         self.buffer = ReplayBuffer(cfg.sac.buffer_size, cfg.num_envs, obs_dim, 1 + self.policy.s, cfg.advantage.gamma,
-                                   goals, cfg.sac.her_future)  # fmt: skip
+                                   goals, cfg.sac.her_future, path_len, cfg.reward_scale)  # fmt: skip
         self.relabels = goals is not None
         """Whether minibatches get relabelled goals (a goal-conditioned environment and ``her_future`` > 0)."""
         self.rng = np.random.default_rng(cfg.seed + 15_485_863)  # minibatch draws and goal relabelling
@@ -129,8 +131,9 @@ class OffPolicyTrainer:
             terminated = batch.terminated[0].numpy()
             done = terminated | batch.truncated[0].numpy()
             actions = self.policy.to_hybrid(batch.actions[0]).numpy()
+            path = s.last_path[0] if s.last_path is not None else None
             self.buffer.add(s.last_raw_obs[0], s.last_raw_next_obs[0], actions, rewards, batch.discount[0].numpy(),
-                            terminated, done, s.last_tau[0])  # fmt: skip
+                            terminated, done, s.last_tau[0], path)  # fmt: skip
             episodes += finished
             env_steps += batch.env_steps
             self.decisions += n
