@@ -1,6 +1,7 @@
 """Presets, the reproduction runner (process pool and Ray) and the tables, at tiny budgets."""
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -9,7 +10,7 @@ from typer.testing import CliRunner
 
 from hrlp.cli import app
 from hrlp.config import Handover
-from hrlp.experiments.presets import PRESETS, Preset, Run
+from hrlp.experiments.presets import PRESETS, RESEARCH_PRESETS, Preset, Run
 from hrlp.experiments.runner import plan, reproduce, training_seconds
 from hrlp.experiments.tables import bootstrap_interval, build_tables
 from hrlp.fetch import check_installed
@@ -329,10 +330,12 @@ def test_only_runs_the_runs_whose_names_match_and_a_pattern_that_matches_nothing
     assert r.exit_code == 2 and "--only 'gripper+nothing*' matches no run of reach-and-grip-2" in r.output, r.output
 
 
-def test_docs_reproduce_lists_every_preset():
-    text = (Path(__file__).resolve().parents[1] / "docs" / "reproduce.md").read_text()
-    missing = [name for name in PRESETS if f"`{name}`" not in text]
-    assert not missing, f"docs/reproduce.md does not list the presets {missing}"
+def test_the_docs_describe_every_preset_the_manual_its_own_and_the_research_record_the_rest():
+    docs = Path(__file__).resolve().parents[1] / "docs"
+    for page, names in (("reproduce.md", PRESETS.keys() - RESEARCH_PRESETS), ("research/presets.md", RESEARCH_PRESETS)):
+        table = (docs / page).read_text().split("| preset | paper | runs |\n")[1].split("\n\n")[0]  # the presets' table
+        rows = {n for line in table.splitlines() for n in re.findall(r"`([a-z0-9-]+)`", line.split("|")[1])}
+        assert rows == set(names), f"docs/{page}: {sorted(rows ^ set(names))}"
 
 
 def test_a_run_with_a_seed_offset_trains_each_seed_plus_it_in_the_seed_s_directory(tmp_path):

@@ -289,9 +289,13 @@ def demo(
 @app.command()
 def presets(
     name: Annotated[str | None, typer.Argument(help="A preset to show whole: its description and its runs.")] = None,
+    all_: Annotated[
+        bool, typer.Option("--all", help="Also list the research record's presets (explorations, superseded settings).")
+    ] = False,
 ) -> None:
-    """List the paper's experiments as presets (runs, seeds, default budget), a line each; with NAME, one preset whole."""
-    from hrlp.experiments.presets import PRESETS
+    """List the paper's experiments and hrlp's own as presets (runs, seeds, default budget), a line each; with NAME, one
+    preset whole."""
+    from hrlp.experiments.presets import PRESETS, RESEARCH
 
     if name is not None:
         if name not in PRESETS:
@@ -300,14 +304,20 @@ def presets(
         console.print(f"[bold]{p.name}[/] ({p.source}): {len(p.runs)} runs x {len(p.seeds)} seeds, {p.budget:,} steps each, "
                       f"metric {p.metric}", soft_wrap=False, highlight=False)  # fmt: skip
         console.print(p.description, highlight=False)
+        if RESEARCH in p.tags:
+            console.print("kept for the research record (docs/research/presets.md): an exploration or a superseded setting",
+                          highlight=False)  # fmt: skip
         for run in p.runs:
             console.print(f"  {run.name}", highlight=False)
         console.print(f"run it: hrlp reproduce {p.name}", highlight=False)
         return
-    rows = [(p.name, str(len(p.runs)), str(len(p.seeds)), f"{p.budget:,}", f"{p.source}: {p.description}")
-            for p in PRESETS.values()]  # fmt: skip
+    shown = [p for p in PRESETS.values() if all_ or RESEARCH not in p.tags]
+    rows = [(p.name, str(len(p.runs)), str(len(p.seeds)), f"{p.budget:,}", f"{p.source}: {p.description}") for p in shown]
     _one_line_table("presets: hrlp reproduce PRESET runs one, hrlp presets PRESET shows it whole",
                     ("preset", "runs", "seeds", "budget", "paper: description"), rows)  # fmt: skip
+    if hidden := len(PRESETS) - len(shown):
+        console.print(f"and {hidden} presets of the research record: hrlp presets --all",
+                      highlight=False)  # fmt: skip
 
 
 def _one_line_table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:

@@ -28,17 +28,25 @@ def test_presets_and_skills_read_at_80_columns_one_line_each(monkeypatch):
     from rich.console import Console
 
     from hrlp import cli
-    from hrlp.experiments.presets import PRESETS
+    from hrlp.experiments.presets import PRESETS, RESEARCH_PRESETS
 
-    for args, entries in ((["presets"], len(PRESETS)), (["skills", "list"], None)):
+    assert RESEARCH_PRESETS < PRESETS.keys()
+    manual = len(PRESETS) - len(RESEARCH_PRESETS)
+    for args, entries in ((["presets"], manual + 1), (["presets", "--all"], len(PRESETS)), (["skills", "list"], None)):
         buf = io.StringIO()
         monkeypatch.setattr(cli, "console", Console(file=buf, force_terminal=True, width=80, color_system=None))
         assert CliRunner().invoke(app, args).exit_code == 0
         lines = buf.getvalue().splitlines()
         assert max(map(len, lines)) <= 80, args
-        if entries is not None:  # a title, a header and one line per preset
+        if entries is not None:  # a title, a header and one line per preset (and one naming those not listed)
             assert len(lines) == entries + 2 and lines[2].startswith("shipped-skills ") and lines[2].endswith("…")
+            listed = {line.split()[0] for line in lines[2:]}
+            assert ("reach-and-grip-2-chained" in listed) == ("--all" in args) and "reach-and-grip-2-chained-recovery-2" in listed
+            footer = f"and {len(RESEARCH_PRESETS)} presets of the research record"
+            assert lines[-1].startswith(footer) != ("--all" in args)
     monkeypatch.undo()
+    research = CliRunner().invoke(app, ["presets", "reach-and-grip-2-tuned"])
+    assert research.exit_code == 0 and "kept for the research record" in research.output
     r = CliRunner().invoke(app, ["presets", "reach-and-grip-1"])
     assert r.exit_code == 0 and "gripper+reacher,c2=3,tr=0.03" in r.output and "hrlp reproduce reach-and-grip-1" in r.output
     bad = CliRunner().invoke(app, ["presets", "nope"])

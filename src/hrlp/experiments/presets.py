@@ -250,7 +250,7 @@ def _appendix_c_tuned() -> tuple[Preset, ...]:
     micro, the skill set whose Managers abandon the Reacher (Section 4.3.1)."""
     base = replace(_tuned_manager(("gripper", "s-reacher"), False), task_kwargs=_BASE_CELL)
     micro_base = replace(_tuned_manager(("gripper", "reacher"), True), task_kwargs=_BASE_CELL)
-    what = "Appendix C at the headline's Manager settings: gripper + s-reacher (Experiment 2, c2 3, tr 0.03)"
+    what = "at the headline's Manager settings: gripper + s-reacher (Experiment 2, c2 3, tr 0.03)"
     return (
         Preset(
             "manager-kl-tuned",
@@ -275,7 +275,7 @@ def _appendix_c_tuned() -> tuple[Preset, ...]:
         ),
         Preset(
             "micro-bounds-tuned",
-            "Appendix C at the headline's Manager settings: gripper + reacher + micro (Experiment 2, c2 3, tr 0.03) with "
+            "at the headline's Manager settings: gripper + reacher + micro (Experiment 2, c2 3, tr 0.03) with "
             "bounded or penalised micro-actions",
             "Appendix C",
             tuple(
@@ -406,8 +406,18 @@ def _fetch_presets() -> tuple[Preset, ...]:
     )  # fmt: skip
 
 
+#: The tag of a preset kept for the research record (``docs/research/``): an exploration, a rung of a recipe or a setting
+#: a later preset superseded. It still runs; ``hrlp presets`` lists it only with ``--all``.
+RESEARCH = "research"
+#: The presets of the research record.
+RESEARCH_PRESETS = frozenset({
+    "reach-and-move-imitated", "reach-and-grip-1-tuned", "reach-and-grip-1-imitated", "reach-and-grip-2-handover",
+    "reach-and-grip-2-reacher-handover", "reach-and-grip-2-imitated", "reach-and-grip-2-clearance", "reach-and-grip-2-chained",
+    "reach-and-grip-2-tuned", "manager-kl-tuned", "manager-k-tuned", "manager-size-tuned", "micro-bounds-tuned",
+})  # fmt: skip
+
 PRESETS: dict[str, Preset] = {
-    p.name: p
+    p.name: replace(p, tags=(*p.tags, RESEARCH)) if p.name in RESEARCH_PRESETS else p
     for p in (
         _shipped_skills(),
         *_fetch_presets(),
@@ -758,7 +768,7 @@ PRESETS: dict[str, Preset] = {
         ),
         Preset(
             "manager-kl",
-            "Appendix C: the Manager (gripper + reacher, Experiment 2) over the maximal KL",
+            "the Manager (gripper + reacher, Experiment 2) over the maximal KL",
             "Appendix C",
             tuple(
                 Run(f"max_kl={kl:g}", _kl(_manager("ReachAndGrip2", ("gripper", "reacher"), 15), kl))
@@ -767,13 +777,13 @@ PRESETS: dict[str, Preset] = {
         ),
         Preset(
             "manager-k",
-            "Appendix C: the Manager (gripper + reacher, Experiment 2) over the macro length k",
+            "the Manager (gripper + reacher, Experiment 2) over the macro length k",
             "Appendix C",
             tuple(Run(f"k={k}", _manager("ReachAndGrip2", ("gripper", "reacher"), k)) for k in (5, 10, 15, 25)),
         ),
         Preset(
             "manager-size",
-            "Appendix C: the Manager (gripper + reacher, Experiment 2) over its hidden layer width",
+            "the Manager (gripper + reacher, Experiment 2) over its hidden layer width",
             "Appendix C",
             tuple(
                 Run(f"hidden={h}", _manager("ReachAndGrip2", ("gripper", "reacher"), 15, hidden=(h, h))) for h in (32, 64, 128)
@@ -781,7 +791,7 @@ PRESETS: dict[str, Preset] = {
         ),
         Preset(
             "micro-bounds",
-            "Appendix C: gripper + reacher + micro with bounded or penalised micro-actions",
+            "gripper + reacher + micro with bounded or penalised micro-actions",
             "Appendix C",
             tuple(
                 Run(
