@@ -10,6 +10,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
+from goal_envs import _NEAR
 from hrlp.algos.sac import SACBatch, SACUpdate
 from hrlp.checkpoint import load_checkpoint
 from hrlp.cli import app
@@ -135,14 +136,30 @@ def test_a_discrete_space_goes_through_the_same_learner(tmp_path):
     assert last["sac/params_log_prob"] == 0 and last["sac/alpha_params"] == pytest.approx(0.1)  # no parameters to tune
 
 
-def test_a_manager_whose_skill_is_framed_on_the_goal_is_refused_relabelling_in_one_line():
-    # near_goal's parameters are offsets from desired_goal: a relabelled goal would move where its past decisions aimed.
+def test_a_relabelled_decision_of_a_skill_framed_on_the_goal_keeps_the_point_it_was_given():
+    # near_goal's parameters are offsets of at most 5 cm from desired_goal: relabelling the goal re-expresses them.
     macro = MacroSpec(skills=("goal_envs:near_goal",))
-    cfg = TrainConfig(task="goal_envs:PointGoal-v0", algo="sac", macro=macro, num_envs=2, batch_steps=16)
-    with pytest.raises(ValueError, match=r"^skill near_goal \(frame desired_goal\): its parameters are offsets from the "
-                       r"desired goal.*--sac-her-future 0"):  # fmt: skip
-        OffPolicyTrainer(cfg)
-    assert not OffPolicyTrainer(dataclasses.replace(cfg, sac=SACConfig(her_future=0))).relabels
+    sac = SACConfig(batch_size=16, learning_starts=8, hidden=(16,))
+    manager = OffPolicyTrainer(TrainConfig(task="goal_envs:PointGoal-v0", algo="sac", sac=sac, macro=macro, num_envs=2,
+                                           batch_steps=40, seed=0))  # fmt: skip
+    try:
+        manager.iterate()
+        b, box = manager.buffer, _NEAR
+        assert b.goals is not None and b.goals.reframe is not None
+        desired = b.goals.desired
+        b.her_future = 0  # the same rows drawn, without relabelling
+        own = b.sample(2000, np.random.default_rng(7))
+        b.her_future = 1000
+        drawn = b.sample(2000, np.random.default_rng(7))
+        moved = (drawn["obs"][:, desired] != own["obs"][:, desired]).any(axis=1)
+        kept = ~moved  # drawn for relabelling, but the point lies outside the box seen from the new goal
+        assert moved.sum() > 100 and kept.sum() > 100
+        point = box.to_user(own["actions"][:, 1:]) + own["obs"][:, desired]
+        seen = box.to_user(drawn["actions"][:, 1:]) + drawn["obs"][:, desired]
+        assert np.allclose(seen, point, atol=1e-5)  # the same point, from either goal
+        assert not np.array_equal(drawn["actions"][moved], own["actions"][moved])
+    finally:
+        manager.close()
 
 
 def test_a_managers_buffer_keeps_the_goal_achieved_after_each_low_level_step_of_its_decisions():

@@ -41,7 +41,8 @@ def test_presets_and_skills_read_at_80_columns_one_line_each(monkeypatch):
         if entries is not None:  # a title, a header and one line per preset (and one naming those not listed)
             assert len(lines) == entries + 2 and lines[2].startswith("shipped-skills ") and lines[2].endswith("…")
             listed = {line.split()[0] for line in lines[2:]}
-            assert ("reach-and-grip-2-chained" in listed) == ("--all" in args) and "reach-and-grip-2-chained-recovery-2" in listed
+            assert ("reach-and-grip-2-chained" in listed) == ("--all" in args)
+            assert "reach-and-grip-2-chained-recovery-2" in listed
             footer = f"and {len(RESEARCH_PRESETS)} presets of the research record"
             assert lines[-1].startswith(footer) != ("--all" in args)
     monkeypatch.undo()

@@ -17,7 +17,10 @@ macro-transition is relabelled with the goal achieved at its end; its reward is 
 it, ``sum_{j < tau} gamma^j r(achieved_j, goal)``, from the achieved goals of those steps, which the buffer keeps
 (``path_len`` of them per transition, ``4 path_len G`` bytes for a ``G``-number goal). Without them (``path_len`` 0)
 the end state stands for every step, ``r(achieved_tau, goal) sum_{j < tau} gamma^j``, which scores a macro-action that
-reaches the goal only at its last step as if it had been there throughout.
+reaches the goal only at its last step as if it had been there throughout. A skill whose parameters are offsets from
+the desired goal (its ``ParamBox.frame`` lies there) keeps the points it was given: its stored block is re-expressed
+from the relabelled goal (:attr:`GoalSpec.reframe`), and a transition whose point lies outside the box seen from there
+keeps its own goal.
 """
 
 from __future__ import annotations
@@ -30,7 +33,10 @@ from typing import Any
 import numpy as np
 import torch
 
-__all__ = ["GoalSpec", "ReplayBuffer"]
+__all__ = ["GoalSpec", "Reframe", "ReplayBuffer"]
+
+#: ``reframe(actions [B, A], obs [B, D], relabelled obs [B, D]) -> (actions, representable [B] bool)``.
+Reframe = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass(frozen=True)
@@ -46,6 +52,10 @@ class GoalSpec:
     convention: batched goals; ``info`` is given as ``{}``)."""
     compute_terminated: Callable[[np.ndarray, np.ndarray, dict], Any] | None = None
     """Its ``compute_terminated`` where it has one: a relabelled transition's end; without one the stored flag stays."""
+    reframe: Reframe | None = None
+    """For a Manager whose parameters are offsets from a part of the desired goal: ``reframe(actions [B, A], obs [B, D],
+    relabelled obs [B, D]) -> (actions, representable [B] bool)``, the actions that pass the same points from the
+    relabelled goal, and whether they fit the parameters' box (a transition whose do not keeps its own goal)."""
 
 
 _FIELDS = ("obs", "next_obs", "actions", "rewards", "discount", "terminated", "tau", "episode_end")
@@ -172,6 +182,15 @@ class ReplayBuffer:
         future = t + np.floor(rng.random(len(t)) * (end - t + 1)).astype(np.int64)
         goal = self.next_obs[future % self.rows, env, g.achieved]
         obs, next_obs = out["obs"], out["next_obs"]
+        if g.reframe is not None:  # parameters framed on the goal: the same points, seen from the relabelled goal
+            relabelled = obs[chosen].copy()
+            relabelled[:, g.desired] = goal
+            actions, ok = g.reframe(out["actions"][chosen], obs[chosen], relabelled)
+            out["actions"] = out["actions"].copy()
+            out["actions"][chosen[ok]] = actions[ok]
+            chosen, t, env, goal = chosen[ok], t[ok], env[ok], goal[ok]
+            if chosen.size == 0:
+                return
         obs[chosen, g.desired] = goal
         next_obs[chosen, g.desired] = goal
         achieved = next_obs[chosen, g.achieved]

@@ -379,7 +379,7 @@ _FETCH_WORKSPACE = ((1.05, 0.45, 0.40), (1.65, 1.05, 0.90))
 #: The Fetch Managers' skills, per task (:mod:`hrlp.fetch.skills`).
 FETCH_SKILLS = {
     "PickAndPlace": ("hrlp.fetch.skills:reach", "hrlp.fetch.skills:grasp", "hrlp.fetch.skills:carry"),
-    "Push": ("hrlp.fetch.skills:push",),
+    "Push": ("hrlp.fetch.skills:push_near_goal",),
     "Slide": ("hrlp.fetch.skills:strike",),
 }
 

@@ -34,6 +34,8 @@ REACH_PARTS = {"grip_pos": (0, 3), "gripper_state": (3, 5), "grip_velp": (5, 8),
 TASKS = {f"Fetch{task}{reward}-v4": parts for task, parts in (("Reach", REACH_PARTS), ("Push", OBJECT_PARTS),
                                                                ("PickAndPlace", OBJECT_PARTS), ("Slide", OBJECT_PARTS))
          for reward in ("", "Dense")}  # fmt: skip
+#: Named parts of the goal keys on the tasks with an object, ``name -> (key, start, stop)``.
+GOAL_PARTS = {"goal_xy": ("desired_goal", 0, 2)}  # where the object must go, on the table's plane (x, y)
 #: FetchReach's own observation parts expressed in the other tasks' named parts (``--bind`` of a skill trained there).
 REACH_BIND = {"achieved_goal": ("grip_pos",), "observation": ("grip_pos", "gripper_state", "grip_velp", "gripper_vel")}
 
@@ -54,7 +56,8 @@ def check_installed() -> None:
 
 
 for _task, _parts in TASKS.items():
-    register_observation_parts(_task, {name: ("observation", lo, hi) for name, (lo, hi) in _parts.items()})
+    register_observation_parts(_task, {**{name: ("observation", lo, hi) for name, (lo, hi) in _parts.items()},
+                                       **(GOAL_PARTS if _parts is OBJECT_PARTS else {})})  # fmt: skip
 register_shipped(Path(__file__).parent / "pretrained")  # fetch-reach (hrlp); the carry skill's SB3 .zip is read by path
 
-__all__ = ["FIRST_FAILING_MUJOCO", "OBJECT_PARTS", "REACH_BIND", "REACH_PARTS", "TASKS", "check_installed"]
+__all__ = ["FIRST_FAILING_MUJOCO", "GOAL_PARTS", "OBJECT_PARTS", "REACH_BIND", "REACH_PARTS", "TASKS", "check_installed"]

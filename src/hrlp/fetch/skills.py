@@ -6,7 +6,8 @@
 * ``carry``: moves the gripper to a point in the workspace (m, world frame), fingers held closed, carrying what they
   hold. Trained by Stable-Baselines3 (SAC + HER on FetchReach-v4), shipped as its ``.zip``.
 * ``push``: pushes the object along the table toward a point (x, y; m, world frame): round behind it, lifted, then
-  down and through. Scripted.
+  down and through. Scripted. ``push_near_goal`` is the same push aiming at an offset of at most 10 cm from the task's
+  goal (``goal_xy``, a named part of ``desired_goal``): the Push Manager's, which starts from the goal itself.
 
 Each is a :class:`~hrlp.skills.core.Skill` reading the parts :mod:`hrlp.fetch` names (``grip_pos``, ``object_pos``,
 ``gripper_state``, ...), so one definition serves FetchPush, FetchPickAndPlace and FetchSlide. Use them by reference,
@@ -42,6 +43,8 @@ OPEN, CLOSED = 1.0, -1.0
 PUSH_HEIGHT, PUSH_SPEED = 0.0, 0.3
 #: Within this distance of its point (m) the object is pushed: the push ends, and a push begun there stays still.
 PUSHED_M = 0.02
+#: How far from the task's goal :data:`push_near_goal` may aim (m).
+AIM_M = 0.1
 #: What FetchReach's blocked fingers always read: its policies see them so wherever they run (:class:`Seeing`); shown
 #: the fingers as they are (open, 0.05 m each), hrlp's reach stopped 8.5 to 10.9 cm from its points instead of 0.2 to 1.1 cm.
 BLOCKED_FINGERS = {"gripper_state": (0.0, 0.0), "gripper_vel": (0.0, 0.0)}
@@ -113,11 +116,21 @@ def _push_act(obs: ObsView, params: np.ndarray) -> np.ndarray:
     return out
 
 
+def _pushed(obs: ObsView, params: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(obs["object_pos"][:, :2] - params[:, :2], axis=1) < PUSHED_M
+
+
 #: Pushes the object along the table toward a point: goes round behind it (lifted), lowers, and pushes through (scripted).
 push = ScriptedSkill(
     "push", ParamBox(WORKSPACE_LOW[:2], WORKSPACE_HIGH[:2], "point to push the object to (x, y), metres"), _push_act,
-    reads=("grip_pos", "object_pos"), k=25,
-    done=lambda obs, p: np.linalg.norm(obs["object_pos"][:, :2] - p, axis=1) < PUSHED_M,
+    reads=("grip_pos", "object_pos"), k=25, done=_pushed,
+)  # fmt: skip
+#: :data:`push` aiming at a point given as an offset of at most :data:`AIM_M` from the task's goal (frame ``goal_xy``):
+#: a Manager learns where near the goal to aim, starting from the goal itself (offset 0).
+push_near_goal = ScriptedSkill(
+    "push_near_goal", ParamBox((-AIM_M, -AIM_M), (AIM_M, AIM_M), "point to push the object to (x, y), offset from the "
+                               "task's goal (m)", frame="goal_xy"), _push_act,
+    reads=("grip_pos", "object_pos"), k=25, done=_pushed,
 )  # fmt: skip
 
 
@@ -196,5 +209,5 @@ def carry() -> Skill:
     return Holding(Seeing(learned, BLOCKED_FINGERS), {3: CLOSED}, "carry")
 
 
-__all__ = ["CLOSED", "OPEN", "STEP_M", "WORKSPACE_HIGH", "WORKSPACE_LOW", "Strike", "carry", "grasp", "push", "reach",
-           "strike"]  # fmt: skip
+__all__ = ["CLOSED", "OPEN", "STEP_M", "WORKSPACE_HIGH", "WORKSPACE_LOW", "Strike", "carry", "grasp", "push",
+           "push_near_goal", "reach", "strike"]  # fmt: skip

@@ -11,6 +11,7 @@ of that moment (those the actor acts with). Rewards are multiplied by ``reward_s
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from hrlp.algos.replay import GoalSpec, ReplayBuffer
+from hrlp.algos.replay import GoalSpec, Reframe, ReplayBuffer
 from hrlp.algos.sac import SACBatch, SACStats, SACUpdate
 from hrlp.checkpoint import load_module, module_tensors, pack_generators, save_checkpoint, unpack_generators
 from hrlp.config import TrainConfig
@@ -31,7 +32,7 @@ from hrlp.skills.macro_env import MacroEnv
 from hrlp.training.environments import action_units, check_skill_hashes, resolve_config, run_factory, skill_hashes
 from hrlp.training.loading import check_action_units, iteration_stats, run_meta
 
-__all__ = ["GOAL_KEYS", "OffPolicyTrainer", "goal_framed_skills", "goal_spec"]
+__all__ = ["GOAL_KEYS", "OffPolicyTrainer", "goal_framed_skills", "goal_reframer", "goal_spec"]
 
 GOAL_KEYS = ("achieved_goal", "desired_goal", "observation")
 """The keys of a goal-conditioned environment's Dict observation (Gymnasium-Robotics' ``GoalEnv``)."""
@@ -56,16 +57,40 @@ def goal_spec(env: gym.Env) -> GoalSpec | None:
     return None
 
 
-def goal_framed_skills(env: MacroEnv, desired: slice) -> list[str]:
-    """The skills of ``env`` whose parameters are offsets from a part that lies in the desired goal's numbers
-    (``desired``): relabelling a decision's goal would change what its parameters meant."""
+def goal_framed_skills(env: MacroEnv, desired: slice) -> list[int]:
+    """The skills of ``env`` (their indices) whose parameters are offsets from a part that lies in the desired goal's
+    numbers (``desired``): relabelling a decision's goal moves the point their stored parameters meant."""
     out = []
-    for skill in env.skills:
+    for i, skill in enumerate(env.skills):
         if skill.params.frame is not None:
             frame = env.layout.span(skill.params.frame)
             if max(frame.start, desired.start) < min(frame.stop, desired.stop):
-                out.append(f"{skill.name} (frame {skill.params.frame})")
+                out.append(i)
     return out
+
+
+def goal_reframer(env: MacroEnv, desired: slice) -> Reframe | None:
+    """The :attr:`GoalSpec.reframe` of a Manager over ``env``'s skills: for the decisions that chose a skill framed on
+    the desired goal, the block that passes the same point from the relabelled goal; None when no skill is so framed."""
+    framed = goal_framed_skills(env, desired)
+    if not framed:
+        return None
+    h = env.hierarchy
+    spans = {s: (h.skills[s].params, env.layout.span(str(h.skills[s].params.frame)),
+                 slice(1 + int(h.offsets[s]), 1 + int(h.offsets[s + 1]))) for s in framed}  # fmt: skip
+
+    def reframe(actions: np.ndarray, obs: np.ndarray, relabelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        actions, ok = np.array(actions, dtype=np.float32), np.ones(len(actions), dtype=bool)
+        choice = actions[:, 0].astype(np.int64)
+        for s, (box, frame, cols) in spans.items():
+            rows = np.flatnonzero(choice == s)
+            point = box.to_user(actions[rows, cols]) + obs[rows, frame]
+            block = box.to_unit(point - relabelled[rows, frame])
+            ok[rows] = (np.abs(block) <= 1.0).all(axis=1)
+            actions[rows, cols] = np.clip(block, -1.0, 1.0)
+        return actions, ok
+
+    return reframe
 
 
 class OffPolicyTrainer:
@@ -83,11 +108,8 @@ class OffPolicyTrainer:
         self.policy = SACActor(obs_dim, probe.action_space, cfg.sac.hidden)
         self.critic = TwinQ(obs_dim, self.policy.param_dims, cfg.sac.hidden)
         goals = goal_spec(probe) if cfg.sac.her_future > 0 else None
-        if goals is not None and isinstance(probe, MacroEnv) and (framed := goal_framed_skills(probe, goals.desired)):
-            probe.close()
-            raise ValueError(f"skill {', '.join(framed)}: its parameters are offsets from the desired goal, which relabelled "
-                             "goals (HER) replace, changing what past parameters meant; give --sac-her-future 0, or "
-                             "parameters in a frame outside the goal")  # fmt: skip
+        if goals is not None and isinstance(probe, MacroEnv):
+            goals = dataclasses.replace(goals, reframe=goal_reframer(probe, goals.desired))
         self._scorer = probe if goals is not None else None  # compute_reward is the probe's: it stays open
         if self._scorer is None:
             probe.close()
