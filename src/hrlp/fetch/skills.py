@@ -43,6 +43,9 @@ OPEN, CLOSED = 1.0, -1.0
 PUSH_HEIGHT, PUSH_SPEED = 0.0, 0.3
 #: Within this distance of its point (m) the object is pushed: the push ends, and a push begun there stays still.
 PUSHED_M = 0.02
+#: The push begins only for a point at least this far from the object (m): a point moved a little, as a Manager's next
+#: decision may move it, is not worth going round the object for.
+BEGIN_M = 0.05
 #: How far from the task's goal :data:`push_near_goal` may aim (m).
 AIM_M = 0.1
 #: What FetchReach's blocked fingers always read: its policies see them so wherever they run (:class:`Seeing`); shown
@@ -111,7 +114,9 @@ def _push_act(obs: ObsView, params: np.ndarray) -> np.ndarray:
     out = np.empty((len(grip), 4))
     out[:, :3] = _toward(target, grip)
     out[pushing, :3] = np.clip(out[pushing, :3], -PUSH_SPEED, PUSH_SPEED)  # slowly: a pushed cube slides on
-    out[dist[:, 0] < PUSHED_M, :3] = 0.0  # there: stay still rather than go round it again and knock it off
+    # There, or near enough not to begin a push (one under way goes on to PUSHED_M): stay still rather than go round it
+    # again and knock it off.
+    out[(dist[:, 0] < PUSHED_M) | ((dist[:, 0] < BEGIN_M) & ~pushing), :3] = 0.0
     out[:, 3] = CLOSED
     return out
 
