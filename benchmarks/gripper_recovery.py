@@ -20,17 +20,12 @@ An existing ``--out`` is never replaced.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from hrlp.arm.env import ArmEnv
-from hrlp.arm.research.starts import write_start_bank
-from hrlp.arm.tasks import HANDOVER_BANK, GripperTask
+from hrlp.arm.research.starts import record_recovery_starts, write_start_bank
+from hrlp.arm.tasks import HANDOVER_BANK
 from hrlp.evaluate import wilson_interval
-from hrlp.experiments.presets import GRIPPER_START
 from hrlp.skills import load_skill
 
 
@@ -54,44 +49,22 @@ def main() -> None:
     if not args.push > 0:
         sys.exit("gripper_recovery: --push must be a positive distance in metres")
     skill = load_skill(args.skill, args.library)
-    task = GripperTask(**GRIPPER_START)
-    env = ArmEnv(task, episode_steps=args.steps)
-    p = env.physics
-    qpos: list[np.ndarray] = []
-    qvel: list[np.ndarray] = []
-    pushed = gripped_after_push = wins = 0
-    for ep in range(args.episodes):
-        obs, _ = env.reset(seed=args.first_seed + ep)
-        c0 = p.capsule.copy()
-        push_step, kept, won = -1, 0, False
-        for t in range(args.steps):
-            held = task.success(p)
-            if not held and push_step < 0 and math.hypot(*(p.capsule[:2] - c0[:2])) > args.push:
-                push_step = t
-            if push_step >= 0 and not held and (t - push_step) % args.every == 0 and kept < args.per_episode:
-                qpos.append(p.data.qpos.copy())
-                qvel.append(p.data.qvel.copy())
-                kept += 1
-            obs, _, _, truncated, info = env.step(skill.torques(obs[None, :24], np.zeros((1, 0)), skill.features_of([p]))[0])
-            won |= bool(info["success"])
-            if truncated:
-                break
-        wins += won
-        if push_step >= 0:
-            pushed += 1
-            gripped_after_push += won
-        if (ep + 1) % 500 == 0:
-            print(f"{ep + 1}/{args.episodes} episodes, {len(qpos)} states", flush=True)
-    env.close()
-    print(f"{args.skill}: success {wilson_interval(wins, args.episodes)} over {args.episodes} episodes; pushed more than "
-          f"{args.push * 100:.0f} cm in {pushed} ({pushed / args.episodes:.1%}), gripped after the push in "
-          f"{gripped_after_push} of them")  # fmt: skip
-    if not qpos:
+
+    def progress(states: int, episodes: int) -> None:
+        if episodes % 500 == 0:
+            print(f"{episodes}/{args.episodes} episodes, {states} states", flush=True)
+
+    rec = record_recovery_starts(skill, args.episodes, first_seed=args.first_seed, steps=args.steps, push=args.push,
+                                 every=args.every, per_episode=args.per_episode, progress=progress)  # fmt: skip
+    print(f"{args.skill}: success {wilson_interval(rec.wins, rec.episodes)} over {rec.episodes} episodes; pushed more "
+          f"than {args.push * 100:.0f} cm in {rec.pushed} ({rec.pushed / rec.episodes:.1%}), gripped after the push in "
+          f"{rec.gripped_after_push} of them")  # fmt: skip
+    if not len(rec.qpos):
         sys.exit("gripper_recovery: no push in these episodes; nothing written")
-    write_start_bank(args.out, {HANDOVER_BANK: (np.stack(qpos), np.stack(qvel))},
+    write_start_bank(args.out, {HANDOVER_BANK: (rec.qpos, rec.qvel)},
                      {"skill": args.skill, "skill_sha256": skill.content_hash, "source": "gripper_recovery",
                       "push": str(args.push), "episodes": str(args.episodes), "first_seed": str(args.first_seed)})  # fmt: skip
-    print(f"wrote {len(qpos)} states to {args.out}")
+    print(f"wrote {len(rec.qpos)} states to {args.out}")
 
 
 if __name__ == "__main__":

@@ -1561,17 +1561,21 @@ def skills_build(
     preset: Annotated[
         str, typer.Option(help="The recipes: shipped-skills (the arm's) or fetch-skills (Fetch's; needs hrlp[fetch]).")
     ] = "shipped-skills",
+    bank_scale: Annotated[
+        float,
+        typer.Option(
+            help="Start banks recorded at this share of their recipes' size.", callback=check.real(0.0, 1.0, low_open=True)
+        ),
+    ] = 1.0,
 ) -> None:
-    """Train shipped skills from their recipes (--preset; default the arm's, 'shipped-skills') and add them to LIBRARY."""
+    """Train shipped skills from their recipes (--preset; default the arm's, 'shipped-skills') and add them to LIBRARY:
+    in stages, each after the skills it starts from, recording the start banks a stage reads from the skills built
+    before it (into LIBRARY/.banks)."""
     from dataclasses import replace
 
-    from hrlp.arm.skill_files import add_run
     from hrlp.checkpoint import CheckpointError
     from hrlp.experiments.presets import PRESETS
-    from hrlp.experiments.runner import plan
-    from hrlp.experiments.runner import reproduce as run_grid
-    from hrlp.skills import SkillLibrary
-    from hrlp.training.loading import policy_skill_files
+    from hrlp.experiments.skill_build import build_skills
 
     recipes = [name for name, p in PRESETS.items() if all(r.skill for r in p.runs)]
     if preset not in recipes:
@@ -1583,20 +1587,8 @@ def skills_build(
         if unknown := sorted(set(names) - set(known)):
             raise ValueError(f"--only: no recipe for {', '.join(unknown)} (recipes: {', '.join(known)})")
         chosen = replace(chosen, runs=tuple(r for r in chosen.runs if not names or r.name in names))
-        lib = SkillLibrary(library)
-        if not overwrite and (taken := [r.skill[0] for r in chosen.runs if r.skill and r.skill[0] in lib.names()]):
-            raise ValueError(f"{library} already has {', '.join(taken)}; pass --overwrite to replace them")
-        run_grid(chosen, out, None, budget, "process", workers, None, reuse=False)
-        if budget is not None:
-            chosen = chosen.with_budget(budget)
-        for job, run in zip(plan(chosen, out), chosen.runs, strict=True):
-            assert run.skill is not None
-            if run.skill_args is None:  # the arm's: the task declares the parameters
-                add_run(lib, job.run_dir, run.skill[0], k=run.skill[1], overwrite=overwrite)
-            else:
-                tensors, manifest = policy_skill_files(job.run_dir, k=run.skill[1], **run.skill_args)
-                lib.save(run.skill[0], tensors, manifest, overwrite=overwrite)
-            console.print(f"skill {run.skill[0]!r} (k = {run.skill[1]}) from {job.run_dir} added to {library}")
+        build_skills(chosen, library, out, budget, workers, overwrite, bank_scale,
+                     lambda line: console.print(line, highlight=False, soft_wrap=True))  # fmt: skip
     except (ValueError, CheckpointError) as e:
         raise _fail(str(e)) from None
 

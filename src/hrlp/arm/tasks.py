@@ -18,10 +18,13 @@ import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 
 from hrlp.arm.physics import BASE_AXIS_XY, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
+from hrlp.skills.library import default_library_root
 
 #: Radius (metres) of the circle around the base axis on which capsules and palms start.
 #: Sampling 200k random arm poses puts the hand within 2 cm of the table at every angle for radii
@@ -426,13 +429,23 @@ GRIPPER_RECOVERY_2_STARTS_FILE = "assets/gripper_recovery_2_starts.npz"
 GRIPPER_BANKS = {"recovery": GRIPPER_RECOVERY_STARTS_FILE, "recovery-2": GRIPPER_RECOVERY_2_STARTS_FILE}
 
 
-def gripper_start_bank(starts: str) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`start_bank` of ``starts``: a shipped bank's name (:data:`GRIPPER_BANKS`) or the path of a bank."""
-    if starts in GRIPPER_BANKS:
-        from importlib import resources
+#: The folder of a skill library that holds the start banks ``hrlp skills build`` records (a skill's name cannot start
+#: with a dot, so it is never taken for a skill).
+BANKS_DIR = ".banks"
 
-        return start_bank(str(resources.files("hrlp.arm").joinpath(GRIPPER_BANKS[starts])))
-    return start_bank(starts)
+
+def bank_file(asset: str) -> Path:
+    """Where the start bank shipped as ``asset`` (a path under the package, ``assets/NAME.npz``) is read from: the skill
+    library's ``.banks/NAME.npz`` (``$HRLP_SKILLS``), which ``hrlp skills build`` writes from the skills it built, where
+    there is one; else the package's own."""
+    own = default_library_root() / BANKS_DIR / Path(asset).name
+    return own if own.is_file() else Path(str(resources.files("hrlp.arm").joinpath(asset)))
+
+
+def gripper_start_bank(starts: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`start_bank` of ``starts``: a shipped bank's name (:data:`GRIPPER_BANKS`, read from :func:`bank_file`) or
+    the path of a bank."""
+    return start_bank(str(bank_file(GRIPPER_BANKS[starts])) if starts in GRIPPER_BANKS else starts)
 
 
 @dataclass(frozen=True)
@@ -651,22 +664,17 @@ def _move_extremes(physics: ArmPhysics) -> tuple[float, float]:
     return -physics.capsule_to_target(), float(physics.capsule[2]) - CAPSULE_REST_Z
 
 
-#: Where ``MoverTask(starts="grip")`` draws its starts from (``scripts/make_mover_starts.py`` writes it).
+#: Where ``MoverTask(starts="grip")`` draws its starts from (:data:`hrlp.arm.banks.BANKS`: ``grip``).
 MOVER_STARTS_FILE = "assets/mover_starts.npz"
-#: Where ``MoverTask(starts="held")`` draws its starts from (``scripts/make_mover_starts.py --held`` writes it).
+#: Where ``MoverTask(starts="held")`` draws its starts from (:data:`hrlp.arm.banks.BANKS`: ``held``).
 MOVER_HELD_STARTS_FILE = "assets/mover_held_starts.npz"
 MOVER_STARTS = ("grip", "placed", "held")
 
 
-@functools.cache
 def grip_starts(variant: str, held: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The recorded ``(qpos [S, nq], qvel [S, nv])`` start states of the Mover ``variant`` (read without pickle):
     along a Gripper skill's successful episodes, or with ``held`` only those with the capsule in the claw."""
-    from importlib import resources
-
-    name = MOVER_HELD_STARTS_FILE if held else MOVER_STARTS_FILE
-    with resources.files("hrlp.arm").joinpath(name).open("rb") as f, np.load(f, allow_pickle=False) as z:
-        return z[f"{variant}_qpos"].astype(np.float64), z[f"{variant}_qvel"].astype(np.float64)
+    return start_bank(str(bank_file(MOVER_HELD_STARTS_FILE if held else MOVER_STARTS_FILE)), variant)
 
 
 @dataclass(frozen=True)

@@ -319,7 +319,7 @@ def _shipped_skills() -> Preset:
         "shipped-skills",
         "the shipped skills: Reacher; Gripper from many close, open-claw starts (c3 -8 and a bonus c4 10 while gripped: "
         "with the paper's three-term reward alone it hovers); Reacher3D; ReacherStabilised (level_coeff 0.1: with 0.5 no "
-        "goal near the table is reached); the Movers from grip starts (scripts/make_mover_starts.py records them from "
+        "goal near the table is reached); the Movers from grip starts (hrlp skills build records them from "
         "the Gripper); a Reacher trained for hand-over (ReacherHandover: pre-grasp goals above the capsule, the capsule left "
         "in place, the claw open); a Gripper seeing the capsule's pose, imitated from the scripted grasp, then TRPO, and one "
         "also seeing the arm's distances to the capsule, imitated from the grasp that escapes tight starts, then trained on "

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,7 @@ def record_grip_starts(
     episode_steps: int = 100,
     num_envs: int = 16,
     held: bool = False,
+    max_episodes: int | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Physics states ``(qpos [states, nq], qvel [states, nv])`` along the ``gripper``'s successful Gripper episodes.
@@ -48,7 +50,8 @@ def record_grip_starts(
     approach and grip that a policy trained from them can start from (demonstration starts). Every ``every``-th state
     of an episode in which Definition 1 held at some step is kept, until ``states`` are collected; with ``held``, only
     those in which it holds (the capsule in the claw: the starts of a Mover that carries what a Gripper gripped).
-    ``progress(kept, episodes)`` is called after every finished episode.
+    ``progress(kept, episodes)`` is called after every finished episode. A ValueError once ``max_episodes`` episodes
+    (None: no limit) have not given ``states`` states: a skill that seldom grips cannot fill the bank.
     """
     if states < 1 or every < 1 or episode_steps < 1 or num_envs < 1:
         raise ValueError("states, every, episode_steps and num_envs must be positive integers")
@@ -91,12 +94,90 @@ def record_grip_starts(
                 episodes += 1
                 if progress is not None:
                     progress(min(len(kept_q), states), episodes)
+                if max_episodes is not None and episodes >= max_episodes and len(kept_q) < states:
+                    for e in envs:
+                        e.close()
+                    what = "held the capsule" if held else "gripped"
+                    raise ValueError(f"the Gripper {what} in too few of {episodes} episodes to record {states} start "
+                                     f"states (got {len(kept_q)})")  # fmt: skip
                 traj[i], gripped[i], steps[i] = [], False, 0
                 o, _ = env.reset()
             obs[i] = o
     for env in envs:
         env.close()
     return np.stack(kept_q[:states]), np.stack(kept_v[:states])
+
+
+@dataclass(frozen=True)
+class RecoveryStarts:
+    """What :func:`record_recovery_starts` recorded, and how the skill fared."""
+
+    qpos: np.ndarray  # [S, nq]
+    qvel: np.ndarray  # [S, nv]
+    episodes: int
+    wins: int
+    """Episodes in which the skill gripped (Definition 1 at some step)."""
+    pushed: int
+    """Episodes in which it pushed the capsule away."""
+    gripped_after_push: int
+
+
+def record_recovery_starts(
+    skill: ArmSkill,
+    episodes: int = 3000,
+    *,
+    first_seed: int = 20_000,
+    steps: int = 100,
+    push: float = 0.03,
+    every: int = 5,
+    per_episode: int = 4,
+    progress: Callable[[int, int], None] | None = None,
+) -> RecoveryStarts:
+    """The states just after a Gripper ``skill``'s own greedy episodes pushed the capsule away (its recovery starts).
+
+    Runs the skill from the Gripper task's close, open-claw starts (:data:`GRIP_START_TASK_ARGS`; environment seeds
+    ``first_seed`` + index) and records the physics state at the first step at which the capsule lies more than ``push``
+    metres (across the table) from where it lay at the start while Definition 1 does not hold, then every ``every``
+    steps after it while the capsule is still not held (at most ``per_episode`` states per episode).
+    ``progress(states, episodes)`` is called after every episode."""
+    if min(episodes, steps, every, per_episode) < 1:
+        raise ValueError("episodes, steps, every and per_episode must be positive integers")
+    if not push > 0:
+        raise ValueError(f"push must be a positive distance in metres, got {push}")
+    env = make("Gripper", episode_steps=steps, **GRIP_START_TASK_ARGS)
+    task, p = env.unwrapped.task, env.unwrapped.physics
+    qpos: list[np.ndarray] = []
+    qvel: list[np.ndarray] = []
+    pushed = gripped_after_push = wins = 0
+    try:
+        for ep in range(episodes):
+            obs, _ = env.reset(seed=first_seed + ep)
+            c0 = p.capsule.copy()
+            push_step, kept, won = -1, 0, False
+            for t in range(steps):
+                held = task.success(p)
+                if not held and push_step < 0 and math.hypot(*(p.capsule[:2] - c0[:2])) > push:
+                    push_step = t
+                if push_step >= 0 and not held and (t - push_step) % every == 0 and kept < per_episode:
+                    qpos.append(p.data.qpos.copy())
+                    qvel.append(p.data.qvel.copy())
+                    kept += 1
+                torques = skill.torques(obs[None], np.zeros((1, 0)), skill.features_of([p]))[0]
+                obs, _, _, truncated, info = env.step(torques)
+                won |= bool(info["success"])
+                if truncated:
+                    break
+            wins += won
+            if push_step >= 0:
+                pushed += 1
+                gripped_after_push += won
+            if progress is not None:
+                progress(len(qpos), ep + 1)
+    finally:
+        env.close()
+    nq, nv = p.model.nq, p.model.nv
+    return RecoveryStarts(np.stack(qpos) if qpos else np.zeros((0, nq)), np.stack(qvel) if qvel else np.zeros((0, nv)),
+                          episodes, wins, pushed, gripped_after_push)  # fmt: skip
 
 
 def write_start_bank(path: Path, banks: dict[str, tuple[np.ndarray, np.ndarray]], meta: dict[str, str]) -> Path:
@@ -111,4 +192,4 @@ def write_start_bank(path: Path, banks: dict[str, tuple[np.ndarray, np.ndarray]]
     return path
 
 
-__all__ = ["GRIP_START_TASK_ARGS", "record_grip_starts", "write_start_bank"]
+__all__ = ["GRIP_START_TASK_ARGS", "RecoveryStarts", "record_grip_starts", "record_recovery_starts", "write_start_bank"]
