@@ -45,7 +45,9 @@ def test_the_recipes_build_in_stages_each_after_the_skills_it_starts_from():
     assert order["gripper-clearance"] < order["gripper-recovery"] < order["gripper-recovery-2"]  # weights and banks
     assert order["reacher"] == order["gripper"] == 0 and max(order.values()) == 2
     assert needs(next(r for r in PRESETS["shipped-skills"].runs if r.name == "gripper-recovery")) == (
-        {"gripper-clearance"}, ("recovery",))
+        {"gripper-clearance"},
+        ("recovery",),
+    )
 
 
 def test_skills_build_records_a_bank_from_the_librarys_own_skill_and_trains_from_it(tmp_path):
