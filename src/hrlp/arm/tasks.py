@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from hrlp.arm.physics import BASE_AXIS_XY, CAPSULE_REST_Z, N_JOINTS, OBS_FEATURES, ArmPhysics
-from hrlp.skills.library import default_library_root
+from hrlp.paths import default_library_root
 
 #: Radius (metres) of the circle around the base axis on which capsules and palms start.
 #: Sampling 200k random arm poses puts the hand within 2 cm of the table at every angle for radii

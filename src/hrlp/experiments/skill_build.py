@@ -25,6 +25,7 @@ from hrlp.arm.skill_files import add_run
 from hrlp.arm.tasks import BANKS_DIR, bank_file
 from hrlp.experiments.presets import Preset, Run
 from hrlp.experiments.runner import plan, reproduce
+from hrlp.paths import SKILLS_ENV
 from hrlp.skills.library import SkillLibrary
 from hrlp.training.loading import policy_skill_files
 
@@ -56,15 +57,15 @@ def stages(runs: tuple[Run, ...]) -> list[tuple[Run, ...]]:
 @contextlib.contextmanager
 def _library_first(library: Path) -> Iterator[None]:
     """``$HRLP_SKILLS`` set to ``library`` (the training processes inherit it), restored afterwards."""
-    old = os.environ.get("HRLP_SKILLS")
-    os.environ["HRLP_SKILLS"] = str(library.resolve())
+    old = os.environ.get(SKILLS_ENV)
+    os.environ[SKILLS_ENV] = str(library.resolve())
     try:
         yield
     finally:
         if old is None:
-            os.environ.pop("HRLP_SKILLS", None)
+            os.environ.pop(SKILLS_ENV, None)
         else:
-            os.environ["HRLP_SKILLS"] = old
+            os.environ[SKILLS_ENV] = old
 
 
 def _bank_skill(path: Path) -> str | None:

@@ -44,6 +44,7 @@ from hrlp.checkpoint import (
     save_checkpoint,
 )
 from hrlp.domains import DOMAINS_GROUP, load_domains
+from hrlp.paths import default_library_root
 from hrlp.policies.mlp import GaussianPolicy, NumpyMLP, mlp
 from hrlp.policies.normalizer import RunningNormalizer
 from hrlp.skills.core import ParamBox, Skill
@@ -67,11 +68,6 @@ def check_skill_name(name: str) -> None:
     if not isinstance(name, str) or not _NAME.match(name):
         raise ValueError(f"skill name {name!r} is not a plain entry name of a skill library: use letters, digits, "
                          "'_', '-', '.', starting with a letter or digit, at most 64 characters")  # fmt: skip
-
-
-def default_library_root() -> Path:
-    """``$HRLP_SKILLS`` if set, else ``~/.hrlp/skills``."""
-    return Path(os.environ.get("HRLP_SKILLS", Path.home() / ".hrlp" / "skills"))
 
 
 def search_roots(library: str | Path | None = None) -> list[Path]:
