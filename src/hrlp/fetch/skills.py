@@ -6,7 +6,7 @@
 * ``carry``: moves the gripper to a point in the workspace (m, world frame), fingers held closed, carrying what they
   hold. Trained by Stable-Baselines3 (SAC + HER on FetchReach-v4), shipped as its ``.zip``.
 * ``push``: pushes the object along the table toward a point (x, y; m, world frame): round behind it, lifted, then
-  down and through. Scripted. ``push_near_goal`` is the same push aiming at an offset of at most 10 cm from the task's
+  down and through. Scripted. ``push_near_goal`` is the same push aiming at an offset of at most 5 cm from the task's
   goal (``goal_xy``, a named part of ``desired_goal``): the Push Manager's, which starts from the goal itself.
 
 Each is a :class:`~hrlp.skills.core.Skill` reading the parts :mod:`hrlp.fetch` names (``grip_pos``, ``object_pos``,
@@ -43,11 +43,13 @@ OPEN, CLOSED = 1.0, -1.0
 PUSH_HEIGHT, PUSH_SPEED = 0.0, 0.3
 #: Within this distance of its point (m) the object is pushed: the push ends, and a push begun there stays still.
 PUSHED_M = 0.02
+#: The strike's run-up: how far behind the object's near side the gripper starts it (m).
+RUN_UP_M = 0.05
 #: The push begins only for a point at least this far from the object (m): a point moved a little, as a Manager's next
 #: decision may move it, is not worth going round the object for.
 BEGIN_M = 0.05
 #: How far from the task's goal :data:`push_near_goal` may aim (m).
-AIM_M = 0.1
+AIM_M = 0.05
 #: What FetchReach's blocked fingers always read: its policies see them so wherever they run (:class:`Seeing`); shown
 #: the fingers as they are (open, 0.05 m each), hrlp's reach stopped 8.5 to 10.9 cm from its points instead of 0.2 to 1.1 cm.
 BLOCKED_FINGERS = {"gripper_state": (0.0, 0.0), "gripper_vel": (0.0, 0.0)}
@@ -164,7 +166,7 @@ class Strike(Skill):
         g = grip[:, :2] - start[:, :2]
         along = (g * u).sum(axis=1)
         lateral = np.linalg.norm(g - along[:, None] * u, axis=1)
-        behind = start[:, :2] - u * (HALF_OBJECT + 0.05)  # a run-up before the object
+        behind = start[:, :2] - u * (HALF_OBJECT + RUN_UP_M)  # a run-up before the object
         low = grip[:, 2] < start[:, 2] + 0.015
         in_line = (along < -HALF_OBJECT) & (lateral < 0.01)
         target = np.concatenate([behind, start[:, 2:3] + 0.06], axis=1)
