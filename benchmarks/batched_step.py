@@ -28,6 +28,7 @@ import numpy as np
 from hrlp.arm import make
 from hrlp.arm.batched import make_batched
 from hrlp.envs.vector import SerialVectorEnv, VectorEnv
+from runlog import add_argument, record
 
 
 @dataclass(frozen=True)
@@ -90,11 +91,13 @@ def main() -> None:
     ap.add_argument("--world-steps", type=int, default=400, help="steps per world and run (more than an episode: a reset)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--episode-steps", type=int, default=300)
+    add_argument(ap)
     args = ap.parse_args()
     print(f"{args.task}, {args.world_steps} steps per world and run ({args.episode_steps}-step episodes), "
           f"median of {args.repeats} interleaved runs")  # fmt: skip
     print(f"{'variant':<34} {'N':>3} {'steps/s':>9} {'x ArmEnv':>9} {'in MuJoCo':>10} {'cpu/wall':>9}")
     best: tuple[float, float, str] = (0.0, 0.0, "")
+    rows: list[dict[str, object]] = []
     for n in (int(x) for x in args.n.split(",")):
         actions = np.random.default_rng(0).uniform(-1, 1, size=(args.world_steps, n, 9))
         vecs = variants(args.task, n, args.episode_steps)
@@ -109,10 +112,14 @@ def main() -> None:
             share = statistics.median(r.mujoco_share for r in rs)
             cpu = statistics.median(r.cpu_per_wall for r in rs)
             print(f"{name:<34} {n:>3} {sps:>9,.0f} {sps / base:>8.2f}x {share:>9.0%} {cpu:>9.2f}")
+            rows.append({"variant": name, "n": n, "steps_per_s": sps, "over_single": sps / base, "mujoco_share": share,
+                         "cpu_per_wall": cpu})  # fmt: skip
             if name != "single ArmEnv loop" and sps / base > best[0]:
                 best = (sps / base, share, f"{name}, N = {n}")
     print(f"fastest: {best[2]}: {best[0]:.2f}x the single ArmEnv loop, {best[1]:.0%} of its time in MuJoCo "
           "(goal: >= 2x and >= 75%)")  # fmt: skip
+    fastest = {"variant": best[2], "over_single": best[0], "mujoco_share": best[1]}
+    record(__file__, {"task": args.task, "world_steps": args.world_steps, "rows": rows, "fastest": fastest}, args.runs_dir)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from runlog import add_argument, record
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -26,6 +28,7 @@ def main() -> None:
     ap.add_argument("--task", default="ReachAndGrip2")
     ap.add_argument("--steps", type=int, default=600_000, help="env steps per run")
     ap.add_argument("--rounds", type=int, default=2)
+    add_argument(ap)
     args = ap.parse_args()
     for c in args.checkouts:
         if not (c / "benchmarks" / "trpo_speed.py").is_file() or not (c / "src" / "hrlp").is_dir():
@@ -34,7 +37,9 @@ def main() -> None:
         raise SystemExit("--steps and --rounds must be positive")
     code = ("import json, sys; sys.path.insert(0, 'benchmarks'); from trpo_speed import hrlp_run; "
             f"print(json.dumps(hrlp_run({args.task!r}, {args.steps}, 0, {{}})))")  # fmt: skip
+    rounds: list[dict[str, dict]] = []
     for r in range(args.rounds):
+        rounds.append({})
         for c in args.checkouts:
             env = {**os.environ, "PYTHONPATH": str(c.resolve() / "src")}
             out = subprocess.run([sys.executable, "-c", code], cwd=c, env=env, capture_output=True, text=True)
@@ -42,9 +47,12 @@ def main() -> None:
                 last = next((line for line in reversed(out.stderr.splitlines()) if line.strip()), "no error output")
                 raise SystemExit(f"{c}: the run failed: {last.strip()}")
             d = json.loads(out.stdout.strip().splitlines()[-1])
+            rounds[-1][str(c)] = d
             print(f"round {r + 1}, {c}: {d['steps_per_s']:.0f} env steps/s, mj_step {d['physics']:.1%} of the cores, "
                   f"TRPO step {d['update']:.1%}, baseline fit {d['value_fit']:.1%}, env {d['env']:.1%}, "
                   f"inference {d['inference']:.1%}", flush=True)  # fmt: skip
+
+    record(__file__, {"task": args.task, "steps": args.steps, "rounds": rounds}, args.runs_dir)
 
 
 if __name__ == "__main__":

@@ -13,12 +13,15 @@ import time
 import gymnasium as gym
 import numpy as np
 
+from runlog import add_argument, record
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--task", default="PickAndPlace", choices=("Reach", "Push", "PickAndPlace", "Slide"))
     ap.add_argument("--num-envs", type=int, default=4)
     ap.add_argument("--steps", type=int, default=4_000, help="environment steps per measurement (all environments)")
+    add_argument(ap)
     args = ap.parse_args()
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -51,6 +54,8 @@ def main() -> None:
     print(f"hrlp VectorEnv:     {steps / hrlp_s:8.0f} steps/s")
     print(f"SB3 DummyVecEnv:    {steps / sb3_s:8.0f} steps/s")
     print(f"hrlp / SB3:         {sb3_s / hrlp_s:8.2f}x")
+    record(__file__, {"task": f"Fetch{args.task}-v4", "envs": n, "steps": steps, "hrlp_steps_per_s": steps / hrlp_s,
+                      "sb3_steps_per_s": steps / sb3_s, "hrlp_over_sb3": sb3_s / hrlp_s}, args.runs_dir)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ import torch
 
 from hrlp.config import PAPER_SETTINGS, MacroSpec, with_settings
 from hrlp.train import TrainConfig, Trainer
+from runlog import add_argument, record
 
 
 def main() -> None:  # run under `if __name__ == "__main__"`: sampling workers are spawned processes
@@ -38,6 +39,7 @@ def main() -> None:  # run under `if __name__ == "__main__"`: sampling workers a
     ap.add_argument("--settings", choices=("defaults", "paper"), default="defaults",
                     help="TrainConfig's defaults or the paper's")  # fmt: skip
     ap.add_argument("--num-envs", type=int, default=None, help="environments of every run (default: the settings')")
+    add_argument(ap)
     args = ap.parse_args()
     torch.set_num_threads(1)
     spec = MacroSpec(("gripper", "reacher"), k=15)
@@ -79,6 +81,10 @@ def main() -> None:  # run under `if __name__ == "__main__"`: sampling workers a
     workers = {kind: tr.cfg.workers for kind, tr in trainers.items()}
     print(f"settings: {args.settings}; workers {workers}; backend {trainers['flat'].cfg.backend}")
     print(f"Manager / flat: sampling {rs:.2f}x, whole iteration {rw:.2f}x (goal: >= 0.83, i.e. within 1.2x)")
+    medians = {kind: {"sampling_steps_per_s": statistics.median(sample[kind]), "steps_per_s": statistics.median(whole[kind]),
+                      "mj_step_share": statistics.median(physics[kind])} for kind in trainers}  # fmt: skip
+    record(__file__, {"settings": args.settings, "workers": workers, "kinds": medians, "manager_over_flat_sampling": rs,
+                      "manager_over_flat_whole": rw}, args.runs_dir)  # fmt: skip
     for tr in trainers.values():
         tr.sampler.close()
 

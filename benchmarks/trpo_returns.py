@@ -26,6 +26,8 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from runlog import add_argument, record
+
 TASK = "Reacher-v5"
 T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228}
 
@@ -111,6 +113,7 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=20, help="evaluation episodes per final policy")
     ap.add_argument("--libs", default="hrlp,sb3", help="comma-separated subset of hrlp,sb3")
     ap.add_argument("--hrlp", default="paper", help=f"hrlp's settings, comma-separated: {', '.join(HRLP_SETTINGS)}")
+    add_argument(ap)
     args = ap.parse_args()
     settings = [s.strip() for s in args.hrlp.split(",") if s.strip()]
     if unknown := [s for s in settings if s not in HRLP_SETTINGS]:
@@ -141,6 +144,8 @@ def main() -> None:
     for lib, xs in scores.items():
         m, h = ci95(xs)
         print(f"{lib:<5} {m:8.2f} +- {h:.2f}")
+    record(__file__, {"task": TASK, "steps": args.steps, "episodes": args.episodes, "returns": scores,
+                      "mean_ci95": {lib: ci95(xs) for lib, xs in scores.items()}}, args.runs_dir)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -39,6 +39,8 @@ import mujoco
 import numpy as np
 import torch
 
+from runlog import add_argument, record
+
 TASK = "Pusher-v5"
 ARM_TASK = "ReachAndGrip2"
 
@@ -259,6 +261,7 @@ def main() -> None:
         "also run, in a subprocess with its own code; the defaults' steps/s are then given as a ratio to it",
     )
     ap.add_argument("--skip", default="", help="comma-separated: pusher (hrlp on it),sb3,tianshou,arm,rss")
+    add_argument(ap)
     ap.add_argument("--rss-child", help=argparse.SUPPRESS)
     ap.add_argument("--rss-baseline", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -276,6 +279,7 @@ def main() -> None:
 
     rates: dict[str, float] = {}
     runs: dict[str, dict[str, float]] = {}
+    figures: dict[str, object] = {"pusher_steps_per_s": rates, "pusher_runs": runs}
     paper = {**PAPER_SETTINGS, "batch_steps": args.batch_steps}
     paper_name = "hrlp paper (--paper-settings: 1 process, 16 envs, exact Fisher, baseline 25 L-BFGS iterations)"
     fast = {**paper, "workers": args.workers, "trpo.fisher_fraction": args.fisher_fraction, "num_envs": args.fast_envs}
@@ -332,6 +336,7 @@ def main() -> None:
                 continue
             arm = hrlp_run(ARM_TASK, args.arm_steps, args.seed, kw)
             arm_rates[name] = arm["steps_per_s"]
+            figures.setdefault("arm_runs", {})[name] = arm  # type: ignore[union-attr]
             cores = int(arm["workers"])
             print(
                 f"\n{ARM_TASK}, {name}, {arm['steps']} env steps: {arm['steps_per_s']:.0f} steps/s, physics alone "
@@ -347,6 +352,8 @@ def main() -> None:
             commit = subprocess.run(["git", "-C", args.baseline_checkout, "rev-parse", "--short", "HEAD"],
                                     capture_output=True, text=True).stdout.strip() or "?"  # fmt: skip
             base = baseline_run(args.baseline_checkout, args.arm_steps, args.batch_steps, args.seed)
+            figures["baseline"] = {"checkout_commit": commit, **base,
+                                   "defaults_over_baseline": arm_rates[defaults_name] / base["steps_per_s"]}  # fmt: skip
             print(
                 f"\n{ARM_TASK}, fastest settings with the code of {Path(args.baseline_checkout).name} (commit {commit}), "
                 f"{base['steps']:.0f} env steps: {base['steps_per_s']:.0f} steps/s; today's defaults / it: "
@@ -357,10 +364,14 @@ def main() -> None:
     if "rss" not in skip:
         base = peak_rss_mib(args.rss_task, args.rss_batch, baseline=True)
         peak = peak_rss_mib(args.rss_task, args.rss_batch, baseline=False)
+        figures["peak_rss_mib"] = {"task": args.rss_task, "batch_steps": args.rss_batch, "vmhwm": peak[1],
+                                   "imports_alone": base[1], "ru_maxrss": peak[0]}  # fmt: skip
         print(
             f"\npeak RSS (VmHWM), hrlp {args.rss_task} batch_steps={args.rss_batch}: {peak[1]:.0f} MiB "
             f"(imports alone {base[1]:.0f} MiB); ru_maxrss {peak[0]:.0f} MiB (includes the parent's RSS at fork)"
         )
+
+    record(__file__, figures, args.runs_dir)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 """Every benchmark script runs end to end at a tiny budget (their figures come from full runs; see docs/benchmarks.md)."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -44,12 +45,25 @@ def _run(script: str, args: str, cwd: Path) -> subprocess.CompletedProcess:
                           timeout=300)  # fmt: skip
 
 
+#: The scripts behind docs/benchmarks.md's goals: each records its run as a dated file (benchmarks/runlog.py).
+RECORDED = {"manager_speed.py", "trpo_speed.py", "trpo_returns.py", "batched_step.py"}
+
+
 @pytest.mark.parametrize("script", sorted(CASES))
 def test_benchmark_script_runs(script, tmp_path):
     args, expected = CASES[script]
     out = _run(script, args, tmp_path)
     assert out.returncode == 0, out.stderr[-2000:]
     assert expected in out.stdout, out.stdout[-2000:]
+    if script in RECORDED:
+        (run,) = (tmp_path / "benchmarks" / "runs").glob(f"{Path(script).stem}-*.json")
+        doc = json.loads(run.read_text())
+        assert doc["script"] == script and doc["command"].startswith(f"python benchmarks/{script} ") and doc["figures"]
+        assert (
+            doc["versions"]["hrlp"]
+            and doc["machine"]["cpus"] >= 1
+            and f"run recorded in {run.relative_to(tmp_path)}" in out.stdout
+        )
 
 
 def test_manager_vs_flat_runs_and_reuses_finished_runs(tmp_path):

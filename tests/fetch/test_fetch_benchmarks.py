@@ -53,7 +53,10 @@ def test_an_hrlp_run_stopped_part_way_continues_from_its_checkpoint_and_its_eval
     assert [s for s, _ in json.loads((tmp_path / "b.json").read_text())["runs"]["sac-0"]["curve"]] == [2000, 4000]
 
 
-def test_fetch_speed_compares_hrlp_and_sb3_sampling():
-    r = _run("benchmarks/fetch_speed.py", "--task", "Push", "--num-envs", "2", "--steps", "200")
+def test_fetch_speed_compares_hrlp_and_sb3_sampling_and_records_the_run(tmp_path):
+    r = _run("benchmarks/fetch_speed.py", "--task", "Push", "--num-envs", "2", "--steps", "200", "--runs-dir", str(tmp_path))
     assert r.returncode == 0, r.stderr[-2000:]
     assert "hrlp VectorEnv:" in r.stdout and "SB3 DummyVecEnv:" in r.stdout and "hrlp / SB3:" in r.stdout
+    (run,) = tmp_path.glob("fetch_speed-*.json")
+    figures = json.loads(run.read_text())["figures"]
+    assert figures["task"] == "FetchPush-v4" and figures["hrlp_over_sb3"] > 0
