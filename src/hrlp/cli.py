@@ -301,14 +301,16 @@ def presets(
         if name not in PRESETS:
             raise ValueError(f"no preset {name!r}; the presets: {', '.join(PRESETS)}")
         p = PRESETS[name]
-        console.print(f"[bold]{p.name}[/] ({p.source}): {len(p.runs)} runs x {len(p.seeds)} seeds, {p.budget:,} steps each, "
-                      f"metric {p.metric}", soft_wrap=False, highlight=False)  # fmt: skip
+        own = any(run.steps for run in p.runs)  # runs with budgets of their own
+        console.print(f"[bold]{p.name}[/] ({p.source}): {len(p.runs)} runs x {len(p.seeds)} seeds, "
+                      f"{'steps per run as listed' if own else f'{p.budget:,} steps each'}, metric {p.metric}",
+                      soft_wrap=False, highlight=False)  # fmt: skip
         console.print(p.description, highlight=False)
         if RESEARCH in p.tags:
             console.print("kept for the research record (docs/research/presets.md): an exploration or a superseded setting",
                           highlight=False)  # fmt: skip
         for run in p.runs:
-            console.print(f"  {run.name}", highlight=False)
+            console.print(f"  {run.name}" + (f" ({run.steps or p.budget:,} steps)" if own else ""), highlight=False)
         console.print(f"run it: hrlp reproduce {p.name}", highlight=False)
         return
     shown = [p for p in PRESETS.values() if all_ or RESEARCH not in p.tags]
