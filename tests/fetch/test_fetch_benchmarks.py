@@ -60,3 +60,17 @@ def test_fetch_speed_compares_hrlp_and_sb3_sampling_and_records_the_run(tmp_path
     (run,) = tmp_path.glob("fetch_speed-*.json")
     figures = json.loads(run.read_text())["figures"]
     assert figures["task"] == "FetchPush-v4" and figures["hrlp_over_sb3"] > 0
+
+
+def test_the_report_says_when_the_managers_first_evaluation_already_reached_0_9():
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from fetch_report import report
+
+    runs = {f"manager-{s}": {"method": "manager", "seed": s, "curve": [[1000, 0.95], [2000, 0.8]], "wall_s": 1.0,
+                             "steps_to_0.9": 1000} for s in range(3)}  # fmt: skip
+    res = {"task": "Push", "steps": 2000, "eval_every": 1000, "eval_episodes": 100, "skill_steps": 0, "runs": runs}
+    text = report([res])
+    assert "| 0.80, 0.80, 0.80 | 0.95, 0.95, 0.95 | 1,000, 1,000, 1,000 |" in text
+    assert "Every Manager reached 0.9 at its first evaluation" in text and "**not met** (0.800 over 3 seed(s))" in text
+    runs["manager-0"]["steps_to_0.9"] = 2000
+    assert "Every Manager reached 0.9" not in report([res])
