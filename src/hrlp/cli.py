@@ -268,7 +268,7 @@ def demo(
     robot: Annotated[
         str,
         typer.Option(
-            help="arm: reach-and-grip on hrlp's arm; fetch: FetchPickAndPlace (needs hrlp[fetch]).",
+            help="arm: reach-and-grip on hrlp's arm; fetch: FetchPickAndPlace (needs hrlp\\[fetch]).",
             callback=check.choice(("arm", "fetch")),
         ),
     ] = "arm",
@@ -1559,9 +1559,11 @@ def skills_build(
         int | None, typer.Option(help="Environment steps per skill (default: each recipe's own).", callback=_STEPS_CHECK)
     ] = None,
     workers: Annotated[int, typer.Option(help="Runs at once.", callback=check.workers())] = 2,
-    overwrite: Annotated[bool, typer.Option(help="Replace skills of the same names in the library.")] = False,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace skills of the same names, and their start banks, in the library.")
+    ] = False,
     preset: Annotated[
-        str, typer.Option(help="The recipes: shipped-skills (the arm's) or fetch-skills (Fetch's; needs hrlp[fetch]).")
+        str, typer.Option(help="The recipes: shipped-skills (the arm's) or fetch-skills (Fetch's; needs hrlp\\[fetch]).")
     ] = "shipped-skills",
     bank_scale: Annotated[
         float,
