@@ -187,15 +187,23 @@ class Sampler:
         self.last_raw_next_obs: np.ndarray | None = None  # [T, N, obs_dim] raw observations each step produced
         self.last_tau: np.ndarray | None = None  # [T, N] low-level steps of each decision
         self.last_path: np.ndarray | None = None  # [T, N, K, obs_dim] a Manager's observations inside each decision
-        self.keep_paths = False
-        """Whether :meth:`collect` keeps a Manager's observations inside each decision in :attr:`last_path` (off-policy goal
-        relabelling reads them; a large on-policy batch need not hold them)."""
         self._requested: int | None = None
 
     @property
     def num_envs(self) -> int:
         """N, the number of environments."""
         return self.vector_env.num_envs
+
+    @property
+    def keep_paths(self) -> bool:
+        """Whether :meth:`collect` keeps a Manager's observations inside each decision in :attr:`last_path` (off-policy goal
+        relabelling reads them; off by default: a large on-policy batch need not compute nor hold them)."""
+        return bool(getattr(self.vector_env, "record_paths", False))
+
+    @keep_paths.setter
+    def keep_paths(self, value: bool) -> None:
+        if hasattr(self.vector_env, "record_paths"):
+            self.vector_env.record_paths = bool(value)
 
     def request(self, steps_per_env: int) -> None:
         """Ask for a batch of ``steps_per_env`` steps per environment; :meth:`receive` samples and returns it.
@@ -265,7 +273,7 @@ class Sampler:
                                  episode_steps)  # fmt: skip
             next_buf[t] = self.normalizer.normalize(step.next_obs)
             raw_next[t], tau_buf[t] = step.next_obs, step.tau
-            if step.path is not None and self.keep_paths:
+            if step.path is not None:
                 if path_buf is None:
                     path_buf = np.empty((steps_per_env, *step.path.shape))
                 path_buf[t] = step.path

@@ -182,5 +182,8 @@ def test_a_managers_buffer_keeps_the_goal_achieved_after_each_low_level_step_of_
             assert np.array_equal(path[:, :, j][past], end[past])
         first_moved = np.linalg.norm(path[:, :, 0] - start, axis=-1)
         assert ((first_moved > 0) & (first_moved < np.linalg.norm(end - start, axis=-1))).mean() > 0.5  # steps in between
+        manager.sampler.keep_paths = False  # as an on-policy sampler runs: the steps are neither computed nor kept
+        manager.sampler.collect(2)
+        assert manager.sampler.last_path is None and not manager.sampler.vector_env.record_paths
     finally:
         manager.close()

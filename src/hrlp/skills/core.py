@@ -460,7 +460,8 @@ class MacroStep:
     skill_done: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))  # [N] bool: ended by its done test
     path: np.ndarray | None = None
     """``[N, T, obs_dim]``: the observation after each low-level step, ``T`` the hierarchy's longest duration; a world's
-    rows past its ``tau`` repeat its last observation (goal relabelling scores every step of a macro-action)."""
+    rows past its ``tau`` repeat its last observation (goal relabelling scores every step of a macro-action). None
+    unless asked for (:func:`decide`'s ``path``)."""
 
 
 #: ``step(running, actions) -> (obs [M, obs_dim], rewards [M], terminated [M], truncated [M])`` for the worlds
@@ -542,7 +543,7 @@ def initiated(skills: Sequence[Skill], obs: ObsView, choice: np.ndarray, ran: np
 
 
 def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, extra: Extra | None = None,
-           ran: np.ndarray | None = None) -> MacroStep:  # fmt: skip
+           ran: np.ndarray | None = None, path: bool = False) -> MacroStep:  # fmt: skip
     """One Manager decision in ``N`` worlds from ``obs [N, obs_dim]`` over any low-level stepper.
 
     ``actions [N, 1 + S]`` are flat hierarchical actions: the choice, then every skill's block in [-1, 1] (clipped and
@@ -550,7 +551,8 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
     skill acts once on the worlds running it (batched inference) and ``step`` advances those worlds; a world whose
     skill has ended (its duration, its :meth:`Skill.done`, or its episode) waits. ``extra`` gives the parts a domain
     measures outside the observation; ``ran [N]`` the skill each world's previous decision ran (-1: none), for
-    initiation sets. Returns the :class:`MacroStep` (``infos`` empty: the stepper keeps them). Raises a one-line
+    initiation sets; ``path``: also the observation after each low-level step (:attr:`MacroStep.path`). Returns the
+    :class:`MacroStep` (``infos`` empty: the stepper keeps them). Raises a one-line
     ValueError for a wrong shape, NaN/inf, a choice that is not a skill, or a skill's actions of the wrong shape."""
     n, width = len(obs), h.act_dim
     a = np.asarray(actions, dtype=np.float64)
@@ -582,7 +584,7 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
     terminated, truncated, finished = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     lows = np.zeros((n, h.action_dim))
     active = np.ones(n, dtype=bool)
-    path = np.empty((n, int(h.durations.max()), obs.shape[1]))
+    steps = np.empty((n, int(h.durations.max()), obs.shape[1])) if path else None
     last = -1
     for j in range(int(durations.max())):
         active &= durations > j
@@ -599,7 +601,8 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
                                  f"({len(idx)}, {h.action_dim}): the environment's action")  # fmt: skip
             lows[idx] = out
         obs[running], r, term, trunc = step(running, lows[running])
-        path[:, j], last = obs, j
+        if steps is not None:
+            steps[:, j], last = obs, j
         rewards[running] += discount[running] * r
         task_reward[running] += r
         discount[running] *= h.gamma
@@ -616,11 +619,12 @@ def decide(h: Hierarchy, obs: np.ndarray, actions: np.ndarray, step: Stepper, ex
                 stop = going[np.asarray(d, dtype=bool).reshape(len(going))]
                 finished[stop] = True
                 active[stop] = False
-    path[:, last + 1 :] = obs[:, None]
+    if steps is not None:
+        steps[:, last + 1 :] = obs[:, None]
     for s, skill in enumerate(h.skills):
         if skill.cost:
             rewards[choice == s] -= skill.cost
-    return MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, [], finished, path)
+    return MacroStep(obs, rewards, terminated, truncated, discount, tau, task_reward, choice, [], finished, steps)
 
 
 __all__ = [

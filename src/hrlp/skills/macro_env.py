@@ -393,6 +393,8 @@ class ManagerVectorEnv:
         self._on_substep = list(on_substep) if on_substep is not None else [None] * worlds.num_envs
         self._obs: np.ndarray | None = None
         self._ran = np.full(worlds.num_envs, -1, dtype=np.int64)  # the macro-action each world's last decision ran
+        self.record_paths = False
+        """Whether a step also returns the observations after each low-level step (:attr:`VectorStep.path`)."""
 
     @property
     def num_envs(self) -> int:
@@ -454,7 +456,7 @@ class ManagerVectorEnv:
                         f(labels[i])
             return out.next_obs[running], out.rewards[running], out.terminated[running], out.truncated[running]
 
-        res = decide(h, self._obs, actions, step, worlds.measure, self._ran)
+        res = decide(h, self._obs, actions, step, worlds.measure, self._ran, self.record_paths)
         return res, last, success, seconds
 
     def _labels(self, actions: np.ndarray) -> list[str]:
